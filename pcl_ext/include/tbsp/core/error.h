@@ -1,0 +1,48 @@
+#pragma once
+/// \file error.h
+/// \brief The one error policy of tbsp (see docs/errors.md).
+///
+/// - Programmer errors and invalid data throw tbsp::InvalidInput; the message names the
+///   method (`[tbsp::Class::method]`), the offending item and how to fix it.
+/// - File problems throw tbsp::FileError (a kind of InvalidInput) naming the file and line.
+/// - Solver failures throw tbsp::NumericalFailure with the reason; never silent.
+/// - A user cancel (progress callback returned false) throws tbsp::Cancelled.
+/// Outputs passed by reference are left untouched when any of these is thrown.
+
+#include <stdexcept>
+#include <string>
+
+namespace tbsp {
+
+/// Base class of every exception thrown by tbsp.
+class Error : public std::runtime_error {
+public:
+  explicit Error(const std::string& what) : std::runtime_error(what) {}
+};
+
+/// Invalid argument or input data (bad index, empty cloud, NaN coordinates, ...).
+class InvalidInput : public Error {
+public:
+  explicit InvalidInput(const std::string& what) : Error(what) {}
+};
+
+/// A file could not be read or written, or is malformed. The message names the file
+/// (and the line or byte offset where known).
+class FileError : public InvalidInput {
+public:
+  explicit FileError(const std::string& what) : InvalidInput(what) {}
+};
+
+/// A numerical method failed (factorization not positive definite, non-finite result).
+class NumericalFailure : public Error {
+public:
+  explicit NumericalFailure(const std::string& what) : Error(what) {}
+};
+
+/// The operation was cancelled through its progress callback.
+class Cancelled : public Error {
+public:
+  explicit Cancelled(const std::string& what = "operation cancelled") : Error(what) {}
+};
+
+}  // namespace tbsp

@@ -1,0 +1,48 @@
+#pragma once
+/// \file cotan_laplacian.h
+/// \brief Discrete Laplace-Beltrami operators (thesis §3.1, eq. 3.1-3.3).
+///
+/// Sign convention (as libigl): off-diagonal entries are the edge weights, the diagonal is
+/// **minus** their sum, so every row sums to 0 and δ = L V gives δ_i = Σ_j w_ij (v_j − v_i)
+/// (eq. 3.1). With cotangent weights δ_i ≈ −H_i n_i where H_i = κ1 + κ2 (twice the mean
+/// curvature) and n_i the outward normal: on a sphere of radius r, δ_i ≈ −(2/r) n_i.
+///
+/// Robustness: cotangents are computed as cos/sin with sin floored at 1e-12 · |a||b| and
+/// clamped to ±kMaxCotangent, and mixed Voronoi areas are floored at 1e-8 × the mean vertex
+/// area, so obtuse, needle and zero-area triangles never produce Inf/NaN.
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+namespace tbsp {
+
+/// Edge weighting scheme of the Laplacian.
+enum class LaplacianWeights {
+  Cotangent,  ///< w_ij = (cot α_ij + cot β_ij) / (2 A_i), mixed Voronoi areas (eq. 3.2)
+  Uniform     ///< w_ij = 1 / deg(i): δ_i = centroid of the one-ring − v_i
+};
+
+/// Largest |cot| used (angles below ~0.0057° or above ~179.994° are clamped).
+constexpr double kMaxCotangent = 1e4;
+
+/// \brief Symmetric cotangent stiffness matrix C (#V by #V): C_ij = ½(cot α_ij + cot β_ij)
+/// summed over the faces of edge ij, C_ii = −Σ_j C_ij. Negative semi-definite; boundary
+/// edges contribute their single angle. O(#F).
+Eigen::SparseMatrix<double> cotangent_matrix(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F);
+
+/// \brief Mixed Voronoi vertex areas (Meyer et al. 2002), #V: Voronoi region inside
+/// non-obtuse triangles, half/quarter of the triangle area for obtuse ones (Fig. 3.2). The areas
+/// of all vertices sum to the surface area. Isolated vertices get 0. O(#F).
+Eigen::VectorXd voronoi_areas(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F);
+
+/// \brief Uniform graph Laplacian (symmetric): off-diagonal 1 per edge, diagonal −degree.
+Eigen::SparseMatrix<double> uniform_graph_laplacian(const Eigen::MatrixX3i& F, Eigen::Index num_vertices);
+
+/// \brief The Laplacian of eq. 3.2 as a #V by #V matrix (rows sum to 0, not symmetric):
+/// cotangent: L = M⁻¹ C with M = diag(2 · voronoi_areas) so that w_ij = (cot α + cot β)/(2 A_i);
+/// uniform: L = D⁻¹ G (G the graph Laplacian, D the degrees).
+/// Rows of isolated vertices are empty. O(#F).
+Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
+                                      LaplacianWeights weights = LaplacianWeights::Cotangent);
+
+}  // namespace tbsp

@@ -1,0 +1,58 @@
+#pragma once
+/// \file mesh_validation.h
+/// \brief Mesh validation: what is wrong with a mesh, item by item, and a single way for
+/// algorithms to state what they accept (MeshRequirements) and reject the rest.
+
+#include <string>
+#include <vector>
+
+#include "tbsp/mesh/tri_mesh.h"
+
+namespace tbsp {
+
+/// \brief What validate_mesh() found. Index lists hold every offending item (vertex, face or
+/// edge as a vertex pair), so callers can show or repair them.
+struct MeshReport {
+  Eigen::Index num_vertices = 0;
+  Eigen::Index num_faces = 0;
+  std::vector<Eigen::Index> nonfinite_vertices;      ///< NaN/Inf coordinates
+  std::vector<Eigen::Index> bad_index_faces;         ///< an index < 0 or >= #V
+  std::vector<Eigen::Index> degenerate_faces;        ///< repeated vertex or area <= 1e-14 * diag^2
+  std::vector<Eigen::Index> duplicate_faces;         ///< same vertex set as an earlier face
+  std::vector<Eigen::Index> isolated_vertices;       ///< referenced by no face
+  std::vector<std::pair<int, int>> nonmanifold_edges;  ///< shared by more than two faces
+  std::vector<std::pair<int, int>> inconsistent_edges; ///< two faces traverse it in the same direction
+  Eigen::Index boundary_edges = 0;
+  Eigen::Index boundary_loops = 0;
+  Eigen::Index components = 0;                       ///< face-connected components (isolated vertices not counted)
+  int euler_characteristic = 0;                      ///< V - E + F over referenced vertices
+  /// Genus of a closed, connected, manifold mesh; -1 otherwise.
+  int genus = -1;
+
+  /// True when nothing but boundaries was found (a clean, possibly open, manifold mesh).
+  bool isClean() const;
+  /// Multi-line human-readable summary with counts and the first offending items.
+  std::string summary() const;
+};
+
+/// \brief Inspects `mesh` for all the problems listed in MeshReport. O(#F log #F). Never throws.
+MeshReport validate_mesh(const TriMesh& mesh);
+
+/// \brief What an algorithm accepts. Non-finite coordinates, out-of-range indices and empty
+/// meshes are always rejected.
+struct MeshRequirements {
+  bool allow_boundary = true;
+  bool allow_nonmanifold = false;
+  bool allow_degenerate = true;      ///< algorithms built on the clamped cotangent Laplacian cope
+  bool allow_duplicate_faces = false;
+  bool allow_isolated_vertices = true;
+  bool allow_multiple_components = true;
+  bool allow_inconsistent_orientation = true;
+};
+
+/// \brief Validates `mesh` and throws tbsp::InvalidInput when it violates `req`. The message
+/// starts with `[who]`, names the first offending items and says how to fix them.
+/// \returns the report (for callers that want the counts).
+MeshReport require_valid_mesh(const TriMesh& mesh, const MeshRequirements& req, const std::string& who);
+
+}  // namespace tbsp

@@ -1,0 +1,573 @@
+#include "tbsp/deform/laplacian_deformer.h"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <string>
+
+#include "tbsp/core/error.h"
+#include "tbsp/core/logging.h"
+#include "tbsp/deform/rotation_field.h"
+#include "tbsp/deform/rotations.h"
+#include "tbsp/mesh/mesh_validation.h"
+#include "tbsp/mesh/topology.h"
+#include "tbsp/solve/sparse_cholesky.h"
+
+namespace tbsp {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// One scalar equation  m · (Σ_k b_k x_k) = r  with weight w.
+struct ScalarRow {
+  int cid = 0;
+  std::vector<std::pair<int, double>> stencil;  // (vertex, coefficient)
+  Eigen::Vector3d m = Eigen::Vector3d::Zero();
+};
+
+// Two unit vectors orthogonal to d (and to each other).
+void orthonormal_pair(const Eigen::Vector3d& d, Eigen::Vector3d& n1, Eigen::Vector3d& n2) {
+  const Eigen::Vector3d u = d.normalized();
+  const Eigen::Vector3d a = std::abs(u.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  n1 = u.cross(a).normalized();
+  n2 = u.cross(n1).normalized();
+}
+
+const char* type_name(ConstraintType t) {
+  return t == ConstraintType::Position ? "position" : t == ConstraintType::Line ? "line" : "plane";
+}
+
+}  // namespace
+
+struct LaplacianDeformer::Cache {
+  // system
+  bool matrix_valid = false;
+  bool coupled = false;
+  std::vector<int> free_index;  // vertex -> free row, -1 = fixed
+  Eigen::Index n_free = 0;
+  Eigen::MatrixX3d X0;          // fixed positions (hard targets / isolated rest), 0 elsewhere
+  Eigen::SparseMatrix<double> L_free;  // L̂ restricted to free columns (#V by n_free)
+  std::vector<ScalarRow> rows;  // coupled: every scalar row; uncoupled: one row per position constraint
+  SparseCholesky solver;
+  // components
+  Eigen::VectorXi component;
+  int num_components = 0;
+  std::vector<char> isolated;
+  // rotation field
+  bool graph_valid = false;
+  ConstraintGraph graph;
+  RotationField field;
+  std::vector<std::vector<int>> node_constraints;  // per node, constraint ids
+};
+
+LaplacianDeformer::LaplacianDeformer() : cache_(std::make_unique<Cache>()) {}
+LaplacianDeformer::~LaplacianDeformer() = default;
+
+void LaplacianDeformer::requireMesh(const char* who) const {
+  if (!has_mesh_) throw InvalidInput(std::string("[tbsp::LaplacianDeformer::") + who + "] no mesh set; call setMesh() first");
+}
+
+const TriMesh& LaplacianDeformer::mesh() const { return mesh_; }
+
+void LaplacianDeformer::setMesh(const TriMesh& mesh) {
+  MeshRequirements req;
+  req.allow_nonmanifold = true;
+  const MeshReport rep = require_valid_mesh(mesh, req, "tbsp::LaplacianDeformer::setMesh");
+  if (!rep.nonmanifold_edges.empty())
+    logger()->warn("[LaplacianDeformer] mesh has {} non-manifold edges; the Laplacian sums over all incident faces",
+                   rep.nonmanifold_edges.size());
+  mesh_ = mesh;
+  has_mesh_ = true;
+  for (const auto& c : constraints_) checkConstraint(c, "setMesh");
+  const auto t0 = Clock::now();
+  report_progress(progress_, 0.0, "laplacian");
+  L_ = laplacian(mesh_.V, mesh_.F, weights_);
+  if (weights_ == LaplacianWeights::Cotangent) {
+    const Eigen::VectorXd A = voronoi_areas(mesh_.V, mesh_.F);
+    double sum = 0;
+    int cnt = 0;
+    for (Eigen::Index i = 0; i < A.rows(); ++i)
+      if (A(i) > 0) { sum += A(i); ++cnt; }
+    if (cnt) L_ *= sum / cnt;  // L̂ = Ā L: units of length, scale-free weights
+  }
+  L_.makeCompressed();
+  delta_ = L_ * mesh_.V;
+  cache_->num_components = connected_components(mesh_.F, mesh_.V.rows(), cache_->component);
+  cache_->isolated.assign(std::size_t(mesh_.V.rows()), 1);
+  for (Eigen::Index f = 0; f < mesh_.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) cache_->isolated[std::size_t(mesh_.F(f, k))] = 0;
+  report_.t_laplacian = seconds_since(t0);
+  user_rotations_.clear();
+  invalidateMatrix();
+}
+
+void LaplacianDeformer::setLaplacianWeights(LaplacianWeights w) {
+  if (w == weights_) return;
+  weights_ = w;
+  if (has_mesh_) setMesh(TriMesh(mesh_));
+}
+
+void LaplacianDeformer::invalidateMatrix() {
+  cache_->matrix_valid = false;
+  cache_->graph_valid = false;
+}
+
+void LaplacianDeformer::checkConstraint(const DeformConstraint& c, const char* who) const {
+  const std::string w = std::string("[tbsp::LaplacianDeformer::") + who + "] ";
+  requireMesh(who);
+  const auto nv = mesh_.V.rows(), nf = mesh_.F.rows();
+  if (c.at.vertex >= 0) {
+    if (c.at.vertex >= nv)
+      throw InvalidInput(w + "constraint on vertex " + std::to_string(c.at.vertex) + ", but the mesh has " +
+                         std::to_string(nv) + " vertices (valid: 0.." + std::to_string(nv - 1) + ")");
+  } else if (c.at.face >= 0) {
+    if (c.at.face >= nf)
+      throw InvalidInput(w + "constraint on face " + std::to_string(c.at.face) + ", but the mesh has " +
+                         std::to_string(nf) + " faces");
+    if (!c.at.bary.allFinite() || (c.at.bary.array() < -1e-9).any() || std::abs(c.at.bary.sum() - 1.0) > 1e-6)
+      throw InvalidInput(w + "barycentric coordinates (" + std::to_string(c.at.bary.x()) + ", " +
+                         std::to_string(c.at.bary.y()) + ", " + std::to_string(c.at.bary.z()) +
+                         ") on face " + std::to_string(c.at.face) + " must be >= 0 and sum to 1");
+  } else {
+    throw InvalidInput(w + "the constraint is attached to neither a vertex nor a face");
+  }
+  if (!c.target.allFinite()) throw InvalidInput(w + "the constraint target/point is not finite");
+  if (c.type != ConstraintType::Position && !(c.axis.allFinite() && c.axis.norm() > 1e-12))
+    throw InvalidInput(w + std::string("the ") + type_name(c.type) + " constraint needs a non-zero, finite " +
+                       (c.type == ConstraintType::Line ? "direction" : "normal"));
+  if (c.hard) {
+    if (c.type != ConstraintType::Position || c.at.vertex < 0)
+      throw InvalidInput(w + "hard constraints must be position constraints on a vertex; use a soft constraint "
+                             "with a large weight for lines, planes and surface points");
+  } else if (!(std::isfinite(c.weight) && c.weight > 0)) {
+    throw InvalidInput(w + "constraint weight must be > 0 and finite (got " + std::to_string(c.weight) + ")");
+  }
+  if (c.rotation && !(c.rotation->allFinite() && std::abs(c.rotation->determinant() - 1.0) < 1e-3 &&
+                      (c.rotation->transpose() * *c.rotation - Eigen::Matrix3d::Identity()).norm() < 1e-3))
+    throw InvalidInput(w + "the constraint's rotation is not a rotation matrix (orthonormal, det +1)");
+}
+
+int LaplacianDeformer::addConstraint(const DeformConstraint& c) {
+  checkConstraint(c, "addConstraint");
+  if (c.hard)
+    for (const auto& o : constraints_)
+      if (o.hard && o.at.vertex == c.at.vertex)
+        throw InvalidInput("[tbsp::LaplacianDeformer::addConstraint] vertex " + std::to_string(c.at.vertex) +
+                           " already has a hard constraint; move it with setPositionTarget()");
+  DeformConstraint s = c;
+  if (s.type != ConstraintType::Position) s.axis.normalize();
+  constraints_.push_back(s);
+  invalidateMatrix();
+  return int(constraints_.size()) - 1;
+}
+
+int LaplacianDeformer::addPositionConstraint(const SurfacePoint& at, const Eigen::Vector3d& target, double weight) {
+  DeformConstraint c;
+  c.at = at; c.target = target; c.weight = weight;
+  return addConstraint(c);
+}
+
+int LaplacianDeformer::addHardConstraint(int v, const Eigen::Vector3d& target) {
+  DeformConstraint c;
+  c.at = SurfacePoint::atVertex(v); c.target = target; c.hard = true;
+  return addConstraint(c);
+}
+
+int LaplacianDeformer::addLineConstraint(const SurfacePoint& at, const Eigen::Vector3d& point,
+                                         const Eigen::Vector3d& direction, double weight) {
+  DeformConstraint c;
+  c.at = at; c.type = ConstraintType::Line; c.target = point; c.axis = direction; c.weight = weight;
+  return addConstraint(c);
+}
+
+int LaplacianDeformer::addPlaneConstraint(const SurfacePoint& at, const Eigen::Vector3d& point,
+                                          const Eigen::Vector3d& normal, double weight) {
+  DeformConstraint c;
+  c.at = at; c.type = ConstraintType::Plane; c.target = point; c.axis = normal; c.weight = weight;
+  return addConstraint(c);
+}
+
+void LaplacianDeformer::clearConstraints() {
+  constraints_.clear();
+  invalidateMatrix();
+}
+
+namespace {
+DeformConstraint& get(std::vector<DeformConstraint>& cs, int id, const char* who) {
+  if (id < 0 || id >= int(cs.size()))
+    throw InvalidInput(std::string("[tbsp::LaplacianDeformer::") + who + "] no constraint with id " + std::to_string(id) +
+                       " (" + std::to_string(cs.size()) + " constraints)");
+  return cs[std::size_t(id)];
+}
+}  // namespace
+
+void LaplacianDeformer::setPositionTarget(int id, const Eigen::Vector3d& target) {
+  auto& c = get(constraints_, id, "setPositionTarget");
+  if (c.type != ConstraintType::Position)
+    throw InvalidInput("[tbsp::LaplacianDeformer::setPositionTarget] constraint " + std::to_string(id) + " is a " +
+                       type_name(c.type) + " constraint; use setLineOrPlane()");
+  if (!target.allFinite()) throw InvalidInput("[tbsp::LaplacianDeformer::setPositionTarget] target is not finite");
+  c.target = target;  // right-hand side only
+}
+
+void LaplacianDeformer::setLineOrPlane(int id, const Eigen::Vector3d& point, const Eigen::Vector3d& axis) {
+  auto& c = get(constraints_, id, "setLineOrPlane");
+  if (c.type == ConstraintType::Position)
+    throw InvalidInput("[tbsp::LaplacianDeformer::setLineOrPlane] constraint " + std::to_string(id) +
+                       " is a position constraint; use setPositionTarget()");
+  if (!point.allFinite() || !axis.allFinite() || axis.norm() <= 1e-12)
+    throw InvalidInput("[tbsp::LaplacianDeformer::setLineOrPlane] point and a non-zero axis must be finite");
+  c.target = point;
+  const Eigen::Vector3d a = axis.normalized();
+  if (a.cross(c.axis).norm() > 1e-12) {  // orientation changed: the matrix changes
+    c.axis = a;
+    cache_->matrix_valid = false;
+  }
+}
+
+void LaplacianDeformer::setWeight(int id, double weight) {
+  auto& c = get(constraints_, id, "setWeight");
+  if (!(std::isfinite(weight) && weight > 0))
+    throw InvalidInput("[tbsp::LaplacianDeformer::setWeight] weight must be > 0 and finite (got " + std::to_string(weight) + ")");
+  if (c.hard) throw InvalidInput("[tbsp::LaplacianDeformer::setWeight] constraint " + std::to_string(id) + " is hard");
+  if (c.weight != weight) { c.weight = weight; cache_->matrix_valid = false; }
+}
+
+void LaplacianDeformer::setConstraintRotation(int id, const std::optional<Eigen::Matrix3d>& R) {
+  auto& c = get(constraints_, id, "setConstraintRotation");
+  DeformConstraint t = c;
+  t.rotation = R;
+  checkConstraint(t, "setConstraintRotation");
+  c.rotation = R;
+}
+
+void LaplacianDeformer::setUseRotationField(bool on) { use_rotation_field_ = on; }
+
+void LaplacianDeformer::setRotations(const std::vector<Eigen::Matrix3d>& R) {
+  requireMesh("setRotations");
+  if (!R.empty() && Eigen::Index(R.size()) != mesh_.V.rows())
+    throw InvalidInput("[tbsp::LaplacianDeformer::setRotations] got " + std::to_string(R.size()) +
+                       " rotations for " + std::to_string(mesh_.V.rows()) + " vertices");
+  for (std::size_t i = 0; i < R.size(); ++i)
+    if (!R[i].allFinite())
+      throw InvalidInput("[tbsp::LaplacianDeformer::setRotations] rotation " + std::to_string(i) + " is not finite");
+  user_rotations_ = R;
+  if (!R.empty()) use_rotation_field_ = false;
+}
+
+void LaplacianDeformer::setScale(double lambda) {
+  if (!(std::isfinite(lambda) && lambda > 0))
+    throw InvalidInput("[tbsp::LaplacianDeformer::setScale] scale must be > 0 and finite (got " + std::to_string(lambda) + ")");
+  scale_ = lambda;
+}
+
+Eigen::Vector3d LaplacianDeformer::evaluate(const SurfacePoint& p, const Eigen::MatrixX3d& X) const {
+  if (p.vertex >= 0) return X.row(p.vertex).transpose();
+  Eigen::Vector3d r = Eigen::Vector3d::Zero();
+  for (int k = 0; k < 3; ++k) r += p.bary(k) * X.row(mesh_.F(p.face, k)).transpose();
+  return r;
+}
+
+void LaplacianDeformer::checkRank() const {
+  const Cache& c = *cache_;
+  std::vector<Eigen::Matrix3d> S(std::size_t(c.num_components), Eigen::Matrix3d::Zero());
+  std::vector<char> has_face(std::size_t(c.num_components), 0);
+  for (Eigen::Index f = 0; f < mesh_.F.rows(); ++f) has_face[std::size_t(c.component(mesh_.F(f, 0)))] = 1;
+  for (const auto& con : constraints_) {
+    std::vector<int> verts;
+    if (con.at.vertex >= 0) verts.push_back(con.at.vertex);
+    else for (int k = 0; k < 3; ++k) if (con.at.bary(k) != 0) verts.push_back(mesh_.F(con.at.face, k));
+    Eigen::Matrix3d m;
+    if (con.type == ConstraintType::Position) m.setIdentity();
+    else if (con.type == ConstraintType::Plane) m = con.axis * con.axis.transpose();
+    else m = Eigen::Matrix3d::Identity() - con.axis * con.axis.transpose();
+    for (int v : verts) S[std::size_t(c.component(v))] += m;
+  }
+  for (int k = 0; k < c.num_components; ++k) {
+    if (!has_face[std::size_t(k)]) continue;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(S[std::size_t(k)]);
+    if (es.eigenvalues()(0) < 1e-9 * std::max(1.0, es.eigenvalues()(2))) {
+      Eigen::Index v = 0;
+      while (c.component(v) != k) ++v;
+      const Eigen::Vector3d free_dir = es.eigenvectors().col(0);
+      throw InvalidInput("[tbsp::LaplacianDeformer::deform] the constraints leave the mesh component containing "
+                         "vertex " + std::to_string(v) + " free to translate along (" + std::to_string(free_dir.x()) +
+                         ", " + std::to_string(free_dir.y()) + ", " + std::to_string(free_dir.z()) +
+                         "), so the system is singular; add a position constraint on that component (or line/plane "
+                         "constraints whose directions pin all three axes)");
+    }
+  }
+}
+
+void LaplacianDeformer::buildSystem() {
+  Cache& c = *cache_;
+  const Eigen::Index n = mesh_.V.rows();
+  checkRank();
+  // free / fixed split
+  c.free_index.assign(std::size_t(n), 0);
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (c.isolated[std::size_t(i)]) c.free_index[std::size_t(i)] = -1;
+  for (const auto& con : constraints_)
+    if (con.hard) c.free_index[std::size_t(con.at.vertex)] = -1;
+  Eigen::Index nf = 0;
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (c.free_index[std::size_t(i)] == 0) c.free_index[std::size_t(i)] = int(nf++);
+    else c.free_index[std::size_t(i)] = -1;
+  c.n_free = nf;
+  // L̂ restricted to the free columns
+  {
+    std::vector<Eigen::Triplet<double>> t;
+    t.reserve(std::size_t(L_.nonZeros()));
+    for (int col = 0; col < L_.outerSize(); ++col)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(L_, col); it; ++it) {
+        const int fc = c.free_index[std::size_t(it.col())];
+        if (fc >= 0) t.emplace_back(int(it.row()), fc, it.value());
+      }
+    c.L_free.resize(n, nf);
+    c.L_free.setFromTriplets(t.begin(), t.end());
+  }
+  // scalar rows
+  c.coupled = false;
+  for (const auto& con : constraints_)
+    if (!con.hard && con.type != ConstraintType::Position) c.coupled = true;
+  c.rows.clear();
+  for (std::size_t id = 0; id < constraints_.size(); ++id) {
+    const auto& con = constraints_[id];
+    if (con.hard) continue;
+    ScalarRow r;
+    r.cid = int(id);
+    if (con.at.vertex >= 0) r.stencil.emplace_back(con.at.vertex, 1.0);
+    else for (int k = 0; k < 3; ++k) if (con.at.bary(k) != 0) r.stencil.emplace_back(mesh_.F(con.at.face, k), con.at.bary(k));
+    if (!c.coupled) { c.rows.push_back(r); continue; }
+    if (con.type == ConstraintType::Position) {
+      for (int d = 0; d < 3; ++d) { r.m = Eigen::Vector3d::Unit(d); c.rows.push_back(r); }
+    } else if (con.type == ConstraintType::Plane) {
+      r.m = con.axis; c.rows.push_back(r);
+    } else {
+      Eigen::Vector3d n1, n2;
+      orthonormal_pair(con.axis, n1, n2);
+      r.m = n1; c.rows.push_back(r);
+      r.m = n2; c.rows.push_back(r);
+    }
+  }
+  // normal matrix
+  const Eigen::SparseMatrix<double> NL = Eigen::SparseMatrix<double>(c.L_free.transpose() * c.L_free);
+  std::vector<Eigen::Triplet<double>> t;
+  const int dims = c.coupled ? 3 : 1;
+  t.reserve(std::size_t(NL.nonZeros()) * std::size_t(dims) + c.rows.size() * 27);
+  for (int d = 0; d < dims; ++d)
+    for (int col = 0; col < NL.outerSize(); ++col)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(NL, col); it; ++it)
+        t.emplace_back(int(d * nf + it.row()), int(d * nf + it.col()), it.value());
+  for (const auto& r : c.rows) {
+    const double w2 = constraints_[std::size_t(r.cid)].weight * constraints_[std::size_t(r.cid)].weight;
+    for (auto [va, ba] : r.stencil) {
+      const int fa = c.free_index[std::size_t(va)];
+      if (fa < 0) continue;
+      for (auto [vb, bb] : r.stencil) {
+        const int fb = c.free_index[std::size_t(vb)];
+        if (fb < 0) continue;
+        if (!c.coupled) { t.emplace_back(fa, fb, w2 * ba * bb); continue; }
+        for (int d1 = 0; d1 < 3; ++d1)
+          for (int d2 = 0; d2 < 3; ++d2) {
+            const double v = w2 * r.m(d1) * r.m(d2) * ba * bb;
+            if (v != 0) t.emplace_back(int(d1 * nf + fa), int(d2 * nf + fb), v);
+          }
+      }
+    }
+  }
+  Eigen::SparseMatrix<double> N(dims * nf, dims * nf);
+  N.setFromTriplets(t.begin(), t.end());
+  report_progress(progress_, 0.3, "factorize");
+  const auto t0 = Clock::now();
+  if (nf > 0) c.solver.compute(N);
+  report_.t_factorize = seconds_since(t0);
+  c.matrix_valid = true;
+}
+
+Eigen::MatrixX3d LaplacianDeformer::rotatedDelta() {
+  Cache& c = *cache_;
+  last_rotations_.clear();
+  report_.rotation_field = false;
+  report_.rotation_nodes = 0;
+  if (!user_rotations_.empty()) {
+    last_rotations_ = user_rotations_;
+  } else if (use_rotation_field_) {
+    const auto t0 = Clock::now();
+    if (!c.graph_valid) {
+      std::map<int, std::vector<int>> by_vertex;
+      for (std::size_t id = 0; id < constraints_.size(); ++id) {
+        const auto& con = constraints_[id];
+        if (con.type != ConstraintType::Position) continue;
+        int v = con.at.vertex;
+        if (v < 0) {
+          int k;
+          con.at.bary.maxCoeff(&k);
+          v = mesh_.F(con.at.face, k);
+        }
+        by_vertex[v].push_back(int(id));
+      }
+      std::vector<int> nodes;
+      c.node_constraints.clear();
+      for (auto& kv : by_vertex) { nodes.push_back(kv.first); c.node_constraints.push_back(kv.second); }
+      if (nodes.empty())
+        throw InvalidInput("[tbsp::LaplacianDeformer::deform] the rotation field needs position constraints (none set)");
+      ProgressCallback sub;
+      if (progress_) sub = [this](double f, const std::string& s) { return progress_(0.05 + 0.2 * f, s); };
+      c.graph = ConstraintGraph::build(mesh_.V, mesh_.F, nodes, 3, sub);
+      c.field.compute(mesh_.V, mesh_.F, nodes, c.graph.tree_parent, c.graph.tree_order, weights_);
+      c.graph_valid = true;
+    }
+    report_.t_graph = seconds_since(t0);
+    const auto t1 = Clock::now();
+    report_progress(progress_, 0.3, "rotations");
+    const std::size_t k = c.graph.nodes.size();
+    Eigen::MatrixX3d P(Eigen::Index(k), 3), Q(Eigen::Index(k), 3);
+    std::vector<char> given(k, 0);
+    std::vector<Eigen::Matrix3d> Rgiven(k);
+    for (std::size_t i = 0; i < k; ++i) {
+      Eigen::Vector3d p = Eigen::Vector3d::Zero(), q = Eigen::Vector3d::Zero();
+      for (int id : c.node_constraints[i]) {
+        const auto& con = constraints_[std::size_t(id)];
+        p += evaluate(con.at, mesh_.V);
+        q += con.target;
+        if (con.rotation && !given[i]) { given[i] = 1; Rgiven[i] = *con.rotation; }
+      }
+      P.row(Eigen::Index(i)) = p.transpose() / double(c.node_constraints[i].size());
+      Q.row(Eigen::Index(i)) = q.transpose() / double(c.node_constraints[i].size());
+    }
+    bool need_estimate = false;
+    for (std::size_t i = 0; i < k; ++i) need_estimate = need_estimate || !given[i];
+    if (need_estimate) {
+      // the estimate needs a 3D-ish configuration: at least 3 nodes not on one line
+      bool ok = k >= 3;
+      if (ok) {
+        const Eigen::RowVector3d mean = P.colwise().mean();
+        Eigen::MatrixX3d Pc = P.rowwise() - mean;
+        Eigen::JacobiSVD<Eigen::MatrixXd> svd(Pc);
+        ok = svd.singularValues()(1) > 1e-9 * std::max(1e-300, svd.singularValues()(0));
+      }
+      if (!ok)
+        throw InvalidInput("[tbsp::LaplacianDeformer::deform] the rotation field needs at least 3 position constraints "
+                           "not all on one line (got " + std::to_string(k) + " node(s)); add constraints or give "
+                           "rotations explicitly");
+    }
+    std::vector<Eigen::Matrix3d> R = need_estimate ? node_rotations(c.graph, P, Q) : Rgiven;
+    for (std::size_t i = 0; i < k; ++i)
+      if (given[i]) R[i] = Rgiven[i];
+    last_rotations_ = c.field.interpolate(R);
+    report_.rotation_field = true;
+    report_.rotation_nodes = int(k);
+    report_.t_rotations = seconds_since(t1);
+  }
+  Eigen::MatrixX3d d = scale_ * delta_;
+  if (!last_rotations_.empty())
+    for (Eigen::Index i = 0; i < d.rows(); ++i) d.row(i) = (last_rotations_[std::size_t(i)] * d.row(i).transpose()).transpose();
+  return d;
+}
+
+Eigen::MatrixX3d LaplacianDeformer::deform() {
+  requireMesh("deform");
+  Cache& c = *cache_;
+  const Eigen::Index n = mesh_.V.rows();
+  const double t_laplacian = report_.t_laplacian;
+  report_ = DeformReport{};
+  report_.t_laplacian = t_laplacian;
+  report_.vertices = n;
+  report_progress(progress_, 0.0, "laplacian");
+  report_.refactorized = !c.matrix_valid;
+  if (!c.matrix_valid) {
+    report_.t_graph = report_.t_factorize = 0;
+    buildSystem();
+  }
+  const Eigen::MatrixX3d d = rotatedDelta();
+  report_progress(progress_, 0.8, "solve");
+  const auto t0 = Clock::now();
+  // fixed values
+  c.X0 = Eigen::MatrixX3d::Zero(n, 3);
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (c.isolated[std::size_t(i)]) c.X0.row(i) = mesh_.V.row(i);
+  for (const auto& con : constraints_)
+    if (con.hard) c.X0.row(con.at.vertex) = con.target.transpose();
+  const Eigen::Index nf = c.n_free;
+  Eigen::MatrixX3d X = c.X0;
+  if (nf > 0) {
+    const Eigen::MatrixX3d bL = d - L_ * c.X0;
+    const Eigen::MatrixX3d rL = c.L_free.transpose() * bL;  // nf by 3
+    if (!c.coupled) {
+      Eigen::MatrixXd rhs = rL;
+      for (const auto& r : c.rows) {
+        const auto& con = constraints_[std::size_t(r.cid)];
+        Eigen::RowVector3d q = con.target.transpose();
+        for (auto [v, b] : r.stencil)
+          if (c.free_index[std::size_t(v)] < 0) q -= b * c.X0.row(v);
+        const double w2 = con.weight * con.weight;
+        for (auto [v, b] : r.stencil) {
+          const int f = c.free_index[std::size_t(v)];
+          if (f >= 0) rhs.row(f) += w2 * b * q;
+        }
+      }
+      const Eigen::MatrixXd Xf = c.solver.solve(rhs);
+      for (Eigen::Index i = 0; i < n; ++i)
+        if (c.free_index[std::size_t(i)] >= 0) X.row(i) = Xf.row(c.free_index[std::size_t(i)]);
+    } else {
+      Eigen::VectorXd rhs(3 * nf);
+      for (int dd = 0; dd < 3; ++dd) rhs.segment(dd * nf, nf) = rL.col(dd);
+      for (const auto& r : c.rows) {
+        const auto& con = constraints_[std::size_t(r.cid)];
+        double q = r.m.dot(con.target);
+        for (auto [v, b] : r.stencil)
+          if (c.free_index[std::size_t(v)] < 0) q -= b * r.m.dot(c.X0.row(v).transpose());
+        const double w2 = con.weight * con.weight;
+        for (auto [v, b] : r.stencil) {
+          const int f = c.free_index[std::size_t(v)];
+          if (f < 0) continue;
+          for (int dd = 0; dd < 3; ++dd) rhs(dd * nf + f) += w2 * r.m(dd) * b * q;
+        }
+      }
+      const Eigen::VectorXd Xf = c.solver.solve(rhs);
+      for (Eigen::Index i = 0; i < n; ++i) {
+        const int f = c.free_index[std::size_t(i)];
+        if (f >= 0) X.row(i) << Xf(f), Xf(nf + f), Xf(2 * nf + f);
+      }
+    }
+  }
+  report_.t_solve = seconds_since(t0);
+  if (!X.allFinite()) throw NumericalFailure("[tbsp::LaplacianDeformer::deform] the solution is not finite");
+  // report
+  report_.free_vertices = nf;
+  for (Eigen::Index i = 0; i < n; ++i) report_.fixed_isolated += c.isolated[std::size_t(i)] ? 1 : 0;
+  report_.coupled_xyz = c.coupled;
+  report_.scale = scale_;
+  report_.backend = c.solver.backendName();
+  double sq = 0;
+  for (std::size_t id = 0; id < constraints_.size(); ++id) {
+    const auto& con = constraints_[id];
+    const Eigen::Vector3d p = evaluate(con.at, X);
+    ConstraintResidual r;
+    r.id = int(id);
+    r.type = con.type;
+    r.hard = con.hard;
+    const Eigen::Vector3d e = p - con.target;
+    if (con.type == ConstraintType::Position) r.distance = e.norm();
+    else if (con.type == ConstraintType::Plane) r.distance = std::abs(e.dot(con.axis));
+    else r.distance = (e - e.dot(con.axis) * con.axis).norm();
+    report_.residuals.push_back(r);
+    report_.max_residual = std::max(report_.max_residual, r.distance);
+    sq += r.distance * r.distance;
+    if (con.hard) ++report_.hard_constraints;
+    else if (con.type == ConstraintType::Position) ++report_.position_constraints;
+    else if (con.type == ConstraintType::Line) ++report_.line_constraints;
+    else ++report_.plane_constraints;
+  }
+  report_.rms_residual = constraints_.empty() ? 0 : std::sqrt(sq / double(constraints_.size()));
+  report_progress(progress_, 1.0, "solve");
+  return X;
+}
+
+}  // namespace tbsp

@@ -1,0 +1,100 @@
+#include "tbsp/mesh/geodesics.h"
+
+#include <algorithm>
+#include <atomic>
+#include <limits>
+#include <queue>
+#include <cmath>
+#include <set>
+#include <string>
+
+#include "tbsp/core/error.h"
+#include "tbsp/mesh/topology.h"
+
+namespace tbsp {
+
+Eigen::VectorXd dijkstra_distances(const Eigen::MatrixX3d& V, const std::vector<std::vector<int>>& adjacency,
+                                   const std::vector<int>& sources) {
+  const Eigen::Index n = V.rows();
+  const double inf = std::numeric_limits<double>::infinity();
+  Eigen::VectorXd d = Eigen::VectorXd::Constant(n, inf);
+  using Item = std::pair<double, int>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+  for (int s : sources) {
+    if (s < 0 || s >= n)
+      throw InvalidInput("[tbsp::dijkstra_distances] source vertex " + std::to_string(s) + " is out of range (mesh has " +
+                         std::to_string(n) + " vertices)");
+    d(s) = 0;
+    heap.emplace(0.0, s);
+  }
+  while (!heap.empty()) {
+    auto [du, u] = heap.top();
+    heap.pop();
+    if (du > d(u)) continue;
+    for (int v : adjacency[std::size_t(u)]) {
+      const double nd = du + (V.row(u) - V.row(v)).norm();
+      if (nd < d(v)) {
+        d(v) = nd;
+        heap.emplace(nd, v);
+      }
+    }
+  }
+  return d;
+}
+
+Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
+                                         const std::vector<int>& vertices, const ProgressCallback& progress) {
+  const auto adj = vertex_adjacency(F, V.rows());
+  const int k = int(vertices.size());
+  Eigen::MatrixXd D(k, k);
+  for (int v : vertices)
+    if (v < 0 || v >= V.rows())
+      throw InvalidInput("[tbsp::geodesic_distance_matrix] vertex " + std::to_string(v) + " is out of range (mesh has " +
+                         std::to_string(V.rows()) + " vertices)");
+  std::atomic<int> done{0};
+  std::atomic<bool> cancelled{false};
+#pragma omp parallel for schedule(dynamic)
+  for (int a = 0; a < k; ++a) {
+    if (cancelled) continue;
+    const Eigen::VectorXd d = dijkstra_distances(V, adj, {vertices[std::size_t(a)]});
+    for (int b = 0; b < k; ++b) D(a, b) = d(vertices[std::size_t(b)]);
+    const int n_done = ++done;
+#pragma omp critical
+    {
+      if (progress && !cancelled && !progress(double(n_done) / k, "geodesics")) cancelled = true;
+    }
+  }
+  if (cancelled) throw Cancelled("cancelled during 'geodesics'");
+  return 0.5 * (D + D.transpose());
+}
+
+double global_scale_from_geodesics(const Eigen::MatrixX3d& V_reference, const Eigen::MatrixX3d& V_deformed,
+                                   const Eigen::MatrixX3i& F, const std::vector<int>& marked) {
+  const std::string who = "[tbsp::global_scale_from_geodesics] ";
+  if (V_reference.rows() != V_deformed.rows())
+    throw InvalidInput(who + "reference and deformed meshes differ in vertex count (" +
+                       std::to_string(V_reference.rows()) + " vs " + std::to_string(V_deformed.rows()) +
+                       "); pass two poses of the same mesh");
+  std::vector<int> m(marked);
+  std::sort(m.begin(), m.end());
+  m.erase(std::unique(m.begin(), m.end()), m.end());
+  if (m.size() < 2) throw InvalidInput(who + "needs at least 2 distinct marked vertices (got " + std::to_string(m.size()) + ")");
+  const Eigen::MatrixXd D0 = geodesic_distance_matrix(V_reference, F, m);
+  const Eigen::MatrixXd D1 = geodesic_distance_matrix(V_deformed, F, m);
+  double sum = 0;
+  int count = 0;
+  for (std::size_t a = 0; a < m.size(); ++a)
+    for (std::size_t b = a + 1; b < m.size(); ++b) {
+      const double d0 = D0(Eigen::Index(a), Eigen::Index(b)), d1 = D1(Eigen::Index(a), Eigen::Index(b));
+      if (std::isfinite(d0) && std::isfinite(d1) && d0 > 0) {
+        sum += d1 / d0;
+        ++count;
+      }
+    }
+  if (count == 0)
+    throw InvalidInput(who + "no pair of marked vertices is connected by a path of positive length; mark at least two "
+                             "distinct points on the same component");
+  return sum / count;
+}
+
+}  // namespace tbsp

@@ -1,0 +1,66 @@
+#include "tbsp/mesh/topology.h"
+
+#include <algorithm>
+#include <numeric>
+
+namespace tbsp {
+
+Eigen::MatrixX2i unique_edges(const Eigen::MatrixX3i& F) {
+  std::vector<std::pair<int, int>> e;
+  e.reserve(std::size_t(F.rows()) * 3);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      int a = F(f, k), b = F(f, (k + 1) % 3);
+      if (a == b) continue;
+      e.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  std::sort(e.begin(), e.end());
+  e.erase(std::unique(e.begin(), e.end()), e.end());
+  Eigen::MatrixX2i E(Eigen::Index(e.size()), 2);
+  for (std::size_t i = 0; i < e.size(); ++i) E.row(Eigen::Index(i)) << e[i].first, e[i].second;
+  return E;
+}
+
+std::vector<std::vector<int>> vertex_adjacency(const Eigen::MatrixX3i& F, Eigen::Index num_vertices) {
+  std::vector<std::vector<int>> adj(static_cast<std::size_t>(num_vertices));
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      int a = F(f, k), b = F(f, (k + 1) % 3);
+      if (a == b) continue;
+      adj[std::size_t(a)].push_back(b);
+      adj[std::size_t(b)].push_back(a);
+    }
+  for (auto& n : adj) {
+    std::sort(n.begin(), n.end());
+    n.erase(std::unique(n.begin(), n.end()), n.end());
+  }
+  return adj;
+}
+
+int connected_components(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, Eigen::VectorXi& labels) {
+  std::vector<int> parent(static_cast<std::size_t>(num_vertices));
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int x) {
+    while (parent[std::size_t(x)] != x) {
+      parent[std::size_t(x)] = parent[std::size_t(parent[std::size_t(x)])];
+      x = parent[std::size_t(x)];
+    }
+    return x;
+  };
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 1; k < 3; ++k) {
+      int a = find(F(f, 0)), b = find(F(f, k));
+      if (a != b) parent[std::size_t(std::max(a, b))] = std::min(a, b);
+    }
+  labels.resize(num_vertices);
+  std::vector<int> id(std::size_t(num_vertices), -1);
+  int k = 0;
+  for (Eigen::Index i = 0; i < num_vertices; ++i) {
+    int r = find(int(i));
+    if (id[std::size_t(r)] < 0) id[std::size_t(r)] = k++;
+    labels(i) = id[std::size_t(r)];
+  }
+  return k;
+}
+
+}  // namespace tbsp

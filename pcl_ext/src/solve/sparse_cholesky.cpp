@@ -1,0 +1,108 @@
+#include "tbsp/solve/sparse_cholesky.h"
+
+#include <Eigen/SparseCholesky>
+#include <vector>
+#ifdef TBSP_HAVE_CHOLMOD
+#include <Eigen/CholmodSupport>
+#endif
+
+#include "tbsp/core/error.h"
+
+namespace tbsp {
+
+struct SparseCholesky::Impl {
+  Backend backend = Backend::EigenLDLT;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
+#ifdef TBSP_HAVE_CHOLMOD
+  Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>> cholmod;
+#endif
+  bool factorized = false;
+  Eigen::Index n = 0;
+  std::vector<int> outer, inner;  // pattern of the last analysed matrix
+  int analyses = 0, factorizations = 0;
+};
+
+SparseCholesky::SparseCholesky(Backend backend) : impl_(std::make_unique<Impl>()) {
+#ifdef TBSP_HAVE_CHOLMOD
+  impl_->backend = backend == Backend::EigenLDLT ? Backend::EigenLDLT : Backend::Cholmod;
+#else
+  if (backend == Backend::Cholmod)
+    throw InvalidInput("[tbsp::SparseCholesky] CHOLMOD was requested but tbsp was built without it "
+                       "(reconfigure with -DTBSP_WITH_CHOLMOD=ON and libsuitesparse-dev installed)");
+  impl_->backend = Backend::EigenLDLT;
+#endif
+}
+SparseCholesky::~SparseCholesky() = default;
+SparseCholesky::SparseCholesky(SparseCholesky&&) noexcept = default;
+SparseCholesky& SparseCholesky::operator=(SparseCholesky&&) noexcept = default;
+
+bool SparseCholesky::cholmodAvailable() {
+#ifdef TBSP_HAVE_CHOLMOD
+  return true;
+#else
+  return false;
+#endif
+}
+
+void SparseCholesky::compute(const Eigen::SparseMatrix<double>& A_in) {
+  if (A_in.rows() != A_in.cols())
+    throw InvalidInput("[tbsp::SparseCholesky::compute] matrix is " + std::to_string(A_in.rows()) + "x" +
+                       std::to_string(A_in.cols()) + ", expected square");
+  Eigen::SparseMatrix<double> A = A_in;
+  A.makeCompressed();
+  Impl& m = *impl_;
+  m.factorized = false;
+  const bool same_pattern =
+      m.analyses > 0 && m.n == A.rows() && m.outer.size() == std::size_t(A.outerSize() + 1) &&
+      std::equal(m.outer.begin(), m.outer.end(), A.outerIndexPtr()) && m.inner.size() == std::size_t(A.nonZeros()) &&
+      std::equal(m.inner.begin(), m.inner.end(), A.innerIndexPtr());
+  bool ok = false;
+#ifdef TBSP_HAVE_CHOLMOD
+  if (m.backend == Backend::Cholmod) {
+    if (!same_pattern) { m.cholmod.analyzePattern(A); ++m.analyses; }
+    m.cholmod.factorize(A);
+    ok = m.cholmod.info() == Eigen::Success;
+  }
+#endif
+  if (m.backend == Backend::EigenLDLT) {
+    if (!same_pattern) { m.ldlt.analyzePattern(A); ++m.analyses; }
+    m.ldlt.factorize(A);
+    ok = m.ldlt.info() == Eigen::Success && (m.ldlt.vectorD().array() > 0).all();
+  }
+  if (!same_pattern) {
+    m.outer.assign(A.outerIndexPtr(), A.outerIndexPtr() + A.outerSize() + 1);
+    m.inner.assign(A.innerIndexPtr(), A.innerIndexPtr() + A.nonZeros());
+  }
+  m.n = A.rows();
+  ++m.factorizations;
+  if (!ok)
+    throw NumericalFailure("[tbsp::SparseCholesky::compute] the " + std::to_string(A.rows()) + "x" +
+                           std::to_string(A.rows()) + " system is not positive definite (" + backendName() +
+                           "): the problem is under-constrained; add constraints so every part is pinned down");
+  m.factorized = true;
+}
+
+Eigen::MatrixXd SparseCholesky::solve(const Eigen::MatrixXd& B) const {
+  const Impl& m = *impl_;
+  if (!m.factorized) throw NumericalFailure("[tbsp::SparseCholesky::solve] no factorization; call compute() first");
+  if (B.rows() != m.n)
+    throw InvalidInput("[tbsp::SparseCholesky::solve] right-hand side has " + std::to_string(B.rows()) +
+                       " rows, the system " + std::to_string(m.n));
+  Eigen::MatrixXd X;
+#ifdef TBSP_HAVE_CHOLMOD
+  if (m.backend == Backend::Cholmod) X = m.cholmod.solve(B);
+#endif
+  if (m.backend == Backend::EigenLDLT) X = m.ldlt.solve(B);
+  if (!X.allFinite()) throw NumericalFailure("[tbsp::SparseCholesky::solve] the solution is not finite");
+  return X;
+}
+
+bool SparseCholesky::isFactorized() const { return impl_->factorized; }
+Eigen::Index SparseCholesky::rows() const { return impl_->n; }
+std::string SparseCholesky::backendName() const {
+  return impl_->backend == Backend::Cholmod ? "cholmod-supernodal" : "eigen-simplicial-ldlt";
+}
+int SparseCholesky::numAnalyses() const { return impl_->analyses; }
+int SparseCholesky::numFactorizations() const { return impl_->factorizations; }
+
+}  // namespace tbsp

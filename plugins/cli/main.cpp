@@ -1,0 +1,260 @@
+// tbsp — command-line front end of the tbsp plugin suite.
+#include <CLI/CLI.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
+
+#include "progress_bar.h"
+#include "tbsp/core/error.h"
+#include "tbsp/core/logging.h"
+#include "tbsp/deform/laplacian_deformer.h"
+#include "tbsp/io/atomic_file.h"
+#include "tbsp/io/cloud_io.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/mesh/mesh_validation.h"
+#include "tbsp/mesh/primitives.h"
+#include "tbsp/plugins/constraints_json.h"
+#include "tbsp/plugins/deform_report.h"
+#include "tbsp/plugins/preview_render.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct DeformArgs {
+  std::string mesh, constraints, out, report;
+  bool rotation_field = false, uniform = false, quiet = false;
+  double scale = 0;  // 0 = from the constraints file
+};
+
+// Runs one deformation job; returns the deformed mesh and fills the report.
+tbsp::TriMesh run_deform(const tbsp::TriMesh& mesh, const tbsp::DeformJob& job, bool rotation_field, bool uniform,
+                         double scale, bool quiet, tbsp::DeformReport& report) {
+  tbsp::cli::ProgressBar bar(!quiet);
+  tbsp::LaplacianDeformer d;
+  d.setProgressCallback(bar.callback());
+  if (uniform) d.setLaplacianWeights(tbsp::LaplacianWeights::Uniform);
+  else if (job.weights) d.setLaplacianWeights(*job.weights);
+  d.setMesh(mesh);
+  for (const auto& c : job.constraints) d.addConstraint(c);
+  d.setUseRotationField(rotation_field || job.rotation_field.value_or(false));
+  d.setScale(scale > 0 ? scale : job.scale);
+  tbsp::TriMesh out = mesh;
+  out.V = d.deform();
+  out.N.resize(0, 3);
+  bar.finish();
+  report = d.report();
+  return out;
+}
+
+int cmd_deform(const DeformArgs& a) {
+  const tbsp::TriMesh mesh = tbsp::read_mesh(a.mesh);
+  const tbsp::DeformJob job = tbsp::load_constraints_json(a.constraints, mesh);
+  if (job.constraints.empty())
+    throw tbsp::InvalidInput(a.constraints + ": no constraints; at least one position constraint is needed");
+  tbsp::DeformReport rep;
+  const tbsp::TriMesh out = run_deform(mesh, job, a.rotation_field, a.uniform, a.scale, a.quiet, rep);
+  tbsp::write_mesh(a.out, out);
+  nlohmann::json j = tbsp::deform_report_json(rep);
+  j["input"] = {{"mesh", a.mesh}, {"constraints", a.constraints}};
+  j["output"] = a.out;
+  if (!a.report.empty()) tbsp::write_text_file_atomic(a.report, j.dump(2) + "\n");
+  if (!a.quiet)
+    std::cout << "deformed " << rep.vertices << " vertices with " << job.constraints.size() << " constraints"
+              << (rep.rotation_field ? " (rotation field, " + std::to_string(rep.rotation_nodes) + " nodes)" : "")
+              << ": factorize " << rep.t_factorize * 1e3 << " ms, solve " << rep.t_solve * 1e3
+              << " ms, max residual " << rep.max_residual << " -> " << a.out << "\n";
+  return 0;
+}
+
+int cmd_validate(const std::string& path, const std::string& json_out, bool strict) {
+  const tbsp::TriMesh mesh = tbsp::read_mesh(path);
+  const tbsp::MeshReport r = tbsp::validate_mesh(mesh);
+  std::cout << path << ": " << r.summary();
+  if (!json_out.empty()) {
+    nlohmann::json j = {{"file", path},
+                        {"vertices", r.num_vertices},
+                        {"faces", r.num_faces},
+                        {"components", r.components},
+                        {"boundary_edges", r.boundary_edges},
+                        {"boundary_loops", r.boundary_loops},
+                        {"euler_characteristic", r.euler_characteristic},
+                        {"genus", r.genus},
+                        {"nonfinite_vertices", r.nonfinite_vertices},
+                        {"bad_index_faces", r.bad_index_faces},
+                        {"degenerate_faces", r.degenerate_faces},
+                        {"duplicate_faces", r.duplicate_faces},
+                        {"isolated_vertices", r.isolated_vertices},
+                        {"nonmanifold_edges", r.nonmanifold_edges},
+                        {"inconsistent_edges", r.inconsistent_edges},
+                        {"clean", r.isClean()}};
+    tbsp::write_text_file_atomic(json_out, j.dump(2) + "\n");
+  }
+  return strict && !r.isClean() ? 4 : 0;
+}
+
+int cmd_demo(const std::string& sample_dir, const std::string& out_dir, bool quiet) {
+  const std::string mesh_path = sample_dir + "/bumpy_bar.off";
+  const std::string cons_path = sample_dir + "/bend_90.json";
+  fs::create_directories(out_dir);
+  const tbsp::TriMesh mesh = tbsp::read_mesh(mesh_path);
+  const tbsp::DeformJob job = tbsp::load_constraints_json(cons_path, mesh);
+  tbsp::DeformReport rep_lin, rep_rot;
+  const tbsp::TriMesh lin = run_deform(mesh, job, false, false, 0, true, rep_lin);
+  const tbsp::TriMesh rot = run_deform(mesh, job, true, false, 0, quiet, rep_rot);
+  tbsp::write_mesh(out_dir + "/bent_rotation_field.ply", rot);
+  tbsp::write_mesh(out_dir + "/bent_linear.ply", lin);
+  // how much each result changed the local shape: edge-length distortion per vertex
+  auto distortion = [&](const tbsp::TriMesh& m) {
+    Eigen::VectorXd d = Eigen::VectorXd::Zero(m.V.rows()), cnt = Eigen::VectorXd::Zero(m.V.rows());
+    for (Eigen::Index f = 0; f < m.F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) {
+        const int a = m.F(f, k), b = m.F(f, (k + 1) % 3);
+        const double l0 = (mesh.V.row(a) - mesh.V.row(b)).norm(), l1 = (m.V.row(a) - m.V.row(b)).norm();
+        const double e = std::abs(l1 / l0 - 1);
+        d(a) += e; d(b) += e; cnt(a) += 1; cnt(b) += 1;
+      }
+    return Eigen::VectorXd(d.cwiseQuotient(cnt.cwiseMax(1)));
+  };
+  const Eigen::VectorXd dl = distortion(lin), dr = distortion(rot);
+  tbsp::TriMesh lin_c = lin, rot_c = rot;
+  lin_c.C = tbsp::colormap(dl, 0, 0.5);
+  rot_c.C = tbsp::colormap(dr, 0, 0.5);
+  tbsp::RenderOptions ro;
+  ro.azimuth_deg = 0;
+  ro.elevation_deg = 0;
+  tbsp::render_panels_png(out_dir + "/demo.png",
+                          {{mesh, "input + constraints"},
+                           {lin_c, "linear (eq. 3.6): edge strain"},
+                           {rot_c, "rotation field (eq. 3.12): edge strain"}},
+                          ro);
+  nlohmann::json j;
+  j["linear"] = tbsp::deform_report_json(rep_lin);
+  j["rotation_field"] = tbsp::deform_report_json(rep_rot);
+  j["mean_edge_strain"] = {{"linear", dl.mean()}, {"rotation_field", dr.mean()}};
+  tbsp::write_text_file_atomic(out_dir + "/report.json", j.dump(2) + "\n");
+  std::cout << "tbsp demo: bent " << mesh_path << " by 90 degrees (" << job.constraints.size() << " constraints)\n"
+            << "  mean edge strain: linear " << dl.mean() << ", with rotation field " << dr.mean() << "\n"
+            << "  wrote " << out_dir << "/bent_rotation_field.ply, bent_linear.ply, demo.png, report.json\n";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"tbsp - template-based shape processing for PCL pipelines"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "tbsp 0.1.0");
+  bool verbose = false;
+  app.add_flag("-v,--verbose", verbose, "debug logging");
+
+  DeformArgs da;
+  auto* deform = app.add_subcommand("deform", "Laplacian deformation of a mesh under constraints (thesis ch. 3)");
+  deform->add_option("--mesh", da.mesh, "input mesh (.ply .obj .off .vtk)")->required()->check(CLI::ExistingFile);
+  deform->add_option("--constraints", da.constraints, "constraints JSON (docs/constraints_json.md)")->required()->check(CLI::ExistingFile);
+  deform->add_option("--out", da.out, "output mesh (.ply .obj .off .vtk), written atomically")->required();
+  deform->add_flag("--rotation-field", da.rotation_field, "estimate and apply the rotation field of §3.2.3 (eq. 3.12)");
+  deform->add_flag("--uniform", da.uniform, "uniform instead of cotangent Laplacian weights");
+  deform->add_option("--scale", da.scale, "global scale λ of the differential coordinates (§5.2)")->check(CLI::PositiveNumber);
+  deform->add_option("--report", da.report, "JSON report: timings, counts, residuals");
+  deform->add_flag("-q,--quiet", da.quiet, "no progress bar or summary");
+
+  std::string v_mesh, v_json;
+  bool v_strict = false;
+  auto* validate = app.add_subcommand("validate", "report mesh problems (non-manifold, degenerate, NaN, ...)");
+  validate->add_option("mesh", v_mesh, "mesh file")->required();
+  validate->add_option("--json", v_json, "also write the report as JSON");
+  validate->add_flag("--strict", v_strict, "exit 4 unless the mesh is clean");
+
+  std::string c_in, c_out;
+  bool c_ascii = false;
+  auto* convert = app.add_subcommand("convert", "convert between mesh formats");
+  convert->add_option("input", c_in, "input mesh")->required();
+  convert->add_option("output", c_out, "output mesh")->required();
+  convert->add_flag("--ascii", c_ascii, "ASCII PLY instead of binary");
+
+  std::vector<std::string> r_meshes;
+  std::string r_out;
+  double r_az = 30, r_el = 20;
+  auto* render = app.add_subcommand("render", "preview PNG of one or more meshes side by side");
+  render->add_option("meshes", r_meshes, "mesh files")->required();
+  render->add_option("--out", r_out, "PNG file")->required();
+  render->add_option("--azimuth", r_az, "view azimuth (degrees)");
+  render->add_option("--elevation", r_el, "view elevation (degrees)");
+
+  std::string g_shape = "icosphere", g_out;
+  int g_level = 3, g_rings = 60, g_segments = 24;
+  auto* generate = app.add_subcommand("generate", "write a procedural mesh (icosphere, grid, tube, bumpy-bar)");
+  generate->add_option("shape", g_shape, "icosphere | grid | tube | bumpy-bar")->required();
+  generate->add_option("--out", g_out, "output mesh")->required();
+  generate->add_option("--level", g_level, "icosphere subdivision level / grid cells = 2^level");
+  generate->add_option("--rings", g_rings, "tube rings");
+  generate->add_option("--segments", g_segments, "tube segments");
+
+  std::string demo_in = TBSP_SAMPLE_DATA_DIR, demo_out = "tbsp_demo_out";
+  bool demo_quiet = false;
+  auto* demo = app.add_subcommand("demo", "run the demo on sample_data/");
+  demo->add_option("--data", demo_in, "sample data folder");
+  demo->add_option("--out", demo_out, "output folder");
+  demo->add_flag("-q,--quiet", demo_quiet, "no progress bar");
+
+  CLI11_PARSE(app, argc, argv);
+  tbsp::logger()->set_level(verbose ? spdlog::level::debug : spdlog::level::warn);
+  const std::string sub = app.get_subcommands().front()->get_name();
+  try {
+    if (*deform) return cmd_deform(da);
+    if (*validate) return cmd_validate(v_mesh, v_json, v_strict);
+    if (*convert) {
+      tbsp::MeshWriteOptions o;
+      o.binary = !c_ascii;
+      tbsp::write_mesh(c_out, tbsp::read_mesh(c_in), o);
+      return 0;
+    }
+    if (*render) {
+      std::vector<tbsp::RenderPanel> panels;
+      for (const auto& m : r_meshes) panels.push_back({tbsp::read_mesh(m), fs::path(m).filename().string()});
+      tbsp::RenderOptions o;
+      o.azimuth_deg = r_az;
+      o.elevation_deg = r_el;
+      tbsp::render_panels_png(r_out, panels, o);
+      return 0;
+    }
+    if (*generate) {
+      tbsp::TriMesh m;
+      if (g_shape == "icosphere") m = tbsp::make_icosphere(g_level);
+      else if (g_shape == "grid") m = tbsp::make_grid(1 << g_level, 1 << g_level);
+      else if (g_shape == "tube") m = tbsp::make_tube(g_rings, g_segments);
+      else if (g_shape == "bumpy-bar") {
+        // tube with a helical ridge pattern, so that shearing and twisting are visible
+        m = tbsp::make_tube(g_rings, g_segments, 1.0, 0.1);
+        for (Eigen::Index i = 0; i < g_rings * g_segments; ++i) {
+          const double x = m.V(i, 0), a = std::atan2(m.V(i, 2), m.V(i, 1));
+          const double r = 1.0 + 0.12 * std::sin(4 * a + 12 * M_PI * x);
+          m.V(i, 1) *= r;
+          m.V(i, 2) *= r;
+        }
+      } else {
+        throw tbsp::InvalidInput("unknown shape '" + g_shape + "' (icosphere, grid, tube, bumpy-bar)");
+      }
+      tbsp::write_mesh(g_out, m);
+      return 0;
+    }
+    if (*demo) return cmd_demo(demo_in, demo_out, demo_quiet);
+  } catch (const tbsp::Cancelled& e) {
+    std::cerr << "tbsp " << sub << ": cancelled: " << e.what() << "\n";
+    return 130;
+  } catch (const tbsp::InvalidInput& e) {
+    std::cerr << "tbsp " << sub << ": error: " << e.what() << "\n";
+    return 2;
+  } catch (const tbsp::NumericalFailure& e) {
+    std::cerr << "tbsp " << sub << ": numerical failure: " << e.what() << "\n";
+    return 3;
+  } catch (const std::exception& e) {
+    std::cerr << "tbsp " << sub << ": error: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,91 @@
+#include "tbsp/plugins/preview_render.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <numeric>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "tbsp/core/error.h"
+#include "tbsp/io/atomic_file.h"
+
+namespace tbsp {
+
+Eigen::MatrixX3d colormap(const Eigen::VectorXd& values, double lo, double hi) {
+  Eigen::MatrixX3d C(values.rows(), 3);
+  for (Eigen::Index i = 0; i < values.rows(); ++i) {
+    double t = hi > lo ? std::clamp((values(i) - lo) / (hi - lo), 0.0, 1.0) : 0.0;
+    // piecewise: blue(0) -> cyan(.25) -> green(.5) -> yellow(.75) -> red(1)
+    const double r = std::clamp(2.0 * t - 0.5, 0.0, 1.0);
+    const double g = t < 0.75 ? std::clamp(4.0 * t, 0.0, 1.0) : std::clamp(4.0 * (1.0 - t), 0.0, 1.0);
+    const double b = std::clamp(1.0 - 2.0 * t, 0.0, 1.0);
+    C.row(i) << r, g, b;
+  }
+  return C;
+}
+
+void render_panels_png(const std::string& path, const std::vector<RenderPanel>& panels, const RenderOptions& o) {
+  if (panels.empty()) throw InvalidInput("[tbsp::render_panels_png] nothing to render");
+  const double az = o.azimuth_deg * M_PI / 180, el = o.elevation_deg * M_PI / 180;
+  // camera: rotate world so the view direction is -z
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(el, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(-az, Eigen::Vector3d::UnitY()))
+                                .toRotationMatrix();
+  const Eigen::Vector3d light = Eigen::Vector3d(0.3, 0.5, 1.0).normalized();
+  cv::Mat canvas(o.panel_height, o.panel_width * int(panels.size()), CV_8UC3, cv::Scalar(255, 255, 255));
+  Eigen::Vector2d gmin(1e300, 1e300), gmax(-1e300, -1e300);
+  std::vector<Eigen::MatrixX3d> P(panels.size());
+  for (std::size_t k = 0; k < panels.size(); ++k) {
+    P[k] = (panels[k].mesh.V * R.transpose());
+    if (P[k].rows() == 0) continue;
+    gmin = gmin.cwiseMin(P[k].leftCols<2>().colwise().minCoeff().transpose());
+    gmax = gmax.cwiseMax(P[k].leftCols<2>().colwise().maxCoeff().transpose());
+  }
+  for (std::size_t k = 0; k < panels.size(); ++k) {
+    const auto& m = panels[k].mesh;
+    const auto& X = P[k];
+    Eigen::Vector2d lo = gmin, hi = gmax;
+    if (!o.shared_frame && X.rows()) {
+      lo = X.leftCols<2>().colwise().minCoeff().transpose();
+      hi = X.leftCols<2>().colwise().maxCoeff().transpose();
+    }
+    const double margin = 0.08;
+    const double s = (1 - 2 * margin) * std::min(o.panel_width / std::max(hi.x() - lo.x(), 1e-300),
+                                                 (o.panel_height - 30) / std::max(hi.y() - lo.y(), 1e-300));
+    const Eigen::Vector2d c = 0.5 * (lo + hi);
+    const int ox = int(k) * o.panel_width;
+    auto px = [&](const Eigen::RowVector3d& p) {
+      const double x = ox + o.panel_width / 2.0 + s * (p.x() - c.x());
+      const double y = 15 + (o.panel_height - 15) / 2.0 - s * (p.y() - c.y());
+      return cv::Point(int(std::lround(x * 16)), int(std::lround(y * 16)));
+    };
+    std::vector<int> order(static_cast<std::size_t>(m.F.rows()));
+    std::iota(order.begin(), order.end(), 0);
+    std::vector<double> depth(order.size());
+    for (std::size_t f = 0; f < order.size(); ++f)
+      depth[f] = X(m.F(Eigen::Index(f), 0), 2) + X(m.F(Eigen::Index(f), 1), 2) + X(m.F(Eigen::Index(f), 2), 2);
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return depth[std::size_t(a)] < depth[std::size_t(b)]; });
+    const bool colored = m.C.rows() == m.V.rows() && m.V.rows() > 0;
+    for (int f : order) {
+      const Eigen::RowVector3d a = X.row(m.F(f, 0)), b = X.row(m.F(f, 1)), cc = X.row(m.F(f, 2));
+      Eigen::Vector3d n = (b - a).cross(cc - a).transpose();
+      if (n.norm() <= 0) continue;
+      n.normalize();
+      const double shade = 0.25 + 0.75 * std::abs(n.dot(light));
+      Eigen::Vector3d base(0.75, 0.78, 0.85);
+      if (colored) base = ((m.C.row(m.F(f, 0)) + m.C.row(m.F(f, 1)) + m.C.row(m.F(f, 2))) / 3.0).transpose();
+      if (n.z() < 0 && !colored) base = Eigen::Vector3d(0.85, 0.6, 0.55);  // back faces tinted
+      const cv::Point pts[3] = {px(a), px(b), px(cc)};
+      const cv::Scalar col(255 * shade * base.z(), 255 * shade * base.y(), 255 * shade * base.x());
+      cv::fillConvexPoly(canvas, pts, 3, col, cv::LINE_AA, 4);
+    }
+    cv::putText(canvas, panels[k].title, cv::Point(ox + 8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+    if (k > 0) cv::line(canvas, cv::Point(ox, 0), cv::Point(ox, o.panel_height), cv::Scalar(180, 180, 180));
+  }
+  std::vector<uchar> png;
+  if (!cv::imencode(".png", canvas, png)) throw FileError("cannot encode PNG for '" + path + "'");
+  AtomicFile f(path, true);
+  f.stream().write(reinterpret_cast<const char*>(png.data()), std::streamsize(png.size()));
+  f.commit();
+}
+
+}  // namespace tbsp
