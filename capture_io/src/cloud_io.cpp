@@ -5,7 +5,11 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdint>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <vector>
 #include <limits>
 
 #include "tbsp/core/error.h"
@@ -24,6 +28,77 @@ std::string ext_of(const std::string& path) {
 bool has_field(const pcl::PCLPointCloud2& c, const std::string& n) {
   return std::any_of(c.fields.begin(), c.fields.end(), [&](const pcl::PCLPointField& f) { return f.name == n; });
 }
+
+// PCL 1.13's PCDReader dereferences past the end of truncated binary files (segfault), so the
+// header and the data size are checked here first; errors name the file and the item.
+void prevalidate_pcd(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError("'" + path + "': cannot open for reading");
+  in.seekg(0, std::ios::end);
+  const std::uint64_t file_size = std::uint64_t(in.tellg());
+  in.seekg(0);
+  std::vector<std::string> fields;
+  std::vector<long long> sizes, counts;
+  long long width = -1, height = 1, points = -1;
+  std::string data, line;
+  int lineno = 0;
+  auto fail = [&](const std::string& m) { throw FileError(path + ":" + std::to_string(lineno) + ": " + m); };
+  while (data.empty() && std::getline(in, line)) {
+    ++lineno;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    std::string key;
+    ls >> key;
+    std::vector<std::string> vals;
+    for (std::string v; ls >> v;) vals.push_back(v);
+    auto integer = [&](const std::string& v) {
+      long long x;
+      try { std::size_t used; x = std::stoll(v, &used); if (used != v.size()) throw 0; } catch (...) { fail(key + ": '" + v + "' is not an integer"); }
+      return x;
+    };
+    if (key == "VERSION" || key == "VIEWPOINT" || key == "TYPE") continue;
+    if (key == "FIELDS" || key == "COLUMNS") fields = vals;
+    else if (key == "SIZE") for (auto& v : vals) sizes.push_back(integer(v));
+    else if (key == "COUNT") for (auto& v : vals) counts.push_back(integer(v));
+    else if (key == "WIDTH" && vals.size() == 1) width = integer(vals[0]);
+    else if (key == "HEIGHT" && vals.size() == 1) height = integer(vals[0]);
+    else if (key == "POINTS" && vals.size() == 1) points = integer(vals[0]);
+    else if (key == "DATA" && vals.size() == 1) data = vals[0];
+    else fail("unexpected PCD header line '" + line.substr(0, 60) + "' (is this a PCD file?)");
+  }
+  if (data.empty()) fail("no DATA line: not a PCD file, or the header is truncated");
+  if (fields.empty()) fail("no FIELDS line in the PCD header");
+  if (sizes.size() != fields.size()) fail("SIZE has " + std::to_string(sizes.size()) + " entries for " + std::to_string(fields.size()) + " FIELDS");
+  if (counts.empty()) counts.assign(fields.size(), 1);
+  if (counts.size() != fields.size()) fail("COUNT has " + std::to_string(counts.size()) + " entries for " + std::to_string(fields.size()) + " FIELDS");
+  if (width < 0 || height < 1) fail("WIDTH/HEIGHT missing or invalid");
+  if (points < 0) points = width * height;
+  if (points != width * height) fail("POINTS " + std::to_string(points) + " != WIDTH x HEIGHT (" + std::to_string(width) + " x " + std::to_string(height) + ")");
+  if (points > 2000000000LL) fail("POINTS " + std::to_string(points) + " is absurd (corrupt header?)");
+  std::uint64_t point_size = 0;
+  for (std::size_t i = 0; i < sizes.size(); ++i) {
+    if (sizes[i] != 1 && sizes[i] != 2 && sizes[i] != 4 && sizes[i] != 8) fail("SIZE " + std::to_string(sizes[i]) + " is not 1, 2, 4 or 8");
+    if (counts[i] < 1) fail("COUNT must be >= 1");
+    point_size += std::uint64_t(sizes[i]) * std::uint64_t(counts[i]);
+  }
+  const std::uint64_t header_end = std::uint64_t(in.tellg());
+  const std::uint64_t remaining = file_size >= header_end ? file_size - header_end : 0;
+  if (data == "binary") {
+    if (remaining < std::uint64_t(points) * point_size)
+      fail("binary data holds " + std::to_string(remaining) + " bytes but " + std::to_string(points) + " points of " +
+           std::to_string(point_size) + " bytes need " + std::to_string(std::uint64_t(points) * point_size) + " (the file is truncated)");
+  } else if (data == "binary_compressed") {
+    std::uint32_t sz[2] = {0, 0};
+    if (remaining < 8 || !in.read(reinterpret_cast<char*>(sz), 8)) fail("binary_compressed data is missing its size header (truncated)");
+    if (sz[0] > remaining - 8) fail("compressed block of " + std::to_string(sz[0]) + " bytes exceeds the file (truncated)");
+    if (std::uint64_t(sz[1]) != std::uint64_t(points) * point_size)
+      fail("decompressed size " + std::to_string(sz[1]) + " does not match POINTS x point size");
+  } else if (data != "ascii") {
+    fail("unknown DATA encoding '" + data + "' (ascii, binary or binary_compressed)");
+  }
+}
+
 }  // namespace
 
 pcl::PCLPointCloud2 read_cloud(const std::string& path) {
@@ -32,6 +107,7 @@ pcl::PCLPointCloud2 read_cloud(const std::string& path) {
   pcl::PCLPointCloud2 blob;
   if (ext_of(path) == "pcd") {
     if (std::filesystem::file_size(path, ec) == 0) throw FileError("'" + path + "': the file is empty");
+    prevalidate_pcd(path);
     pcl::PCDReader reader;
     int rc = -1;
     try {

@@ -11,8 +11,10 @@ namespace tbsp {
 /// 1-to-4 subdivisions, all vertices exactly on the sphere.
 TriMesh make_icosphere(int level, double radius = 1.0);
 
-/// Planar (nx+1) by (ny+1) vertex grid on [0,sx]×[0,sy] at z=0; `jitter` ∈ [0,0.45) moves
-/// interior vertices randomly by up to that fraction of a cell (seeded, deterministic).
+/// Planar (nx+1) by (ny+1) vertex grid on [0,sx]×[0,sy] at z=0; `jitter` moves interior
+/// vertices randomly by up to that fraction of a cell per axis (seeded, deterministic).
+/// jitter < 1/6 keeps every triangle positively oriented (det >= 1 - 6·jitter); larger values
+/// can flip triangles.
 TriMesh make_grid(int nx, int ny, double sx = 1.0, double sy = 1.0, double jitter = 0.0, unsigned seed = 1);
 
 /// Closed capped tube along +x from 0 to `length`: `rings` rings of `segments` vertices with

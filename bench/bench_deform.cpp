@@ -1,0 +1,81 @@
+// Benchmarks of the Laplacian deformation framework (thesis ch. 3): factorization vs
+// back-substitution (prefactor-once / solve-many), CHOLMOD vs Eigen's SimplicialLDLT, and
+// the rotation field. Run: ./build/bench/bench_deform [--benchmark_filter=...]
+#include <benchmark/benchmark.h>
+
+#include <filesystem>
+
+#include "tbsp/deform/laplacian_deformer.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/mesh/cotan_laplacian.h"
+#include "tbsp/mesh/primitives.h"
+#include "tbsp/solve/sparse_cholesky.h"
+
+using namespace tbsp;
+
+namespace {
+TriMesh mesh_for(int level) { return make_icosphere(level); }  // 2562, 10242, 40962, 163842 vertices
+
+void add_handles(LaplacianDeformer& d, const TriMesh& m, double shift) {
+  for (Eigen::Index v = 0; v < m.V.rows(); v += m.V.rows() / 50)
+    d.addPositionConstraint(SurfacePoint::atVertex(int(v)), m.V.row(v).transpose() + Eigen::Vector3d(shift * double(v % 3), 0, 0));
+}
+}  // namespace
+
+static void BM_DeformFactorize(benchmark::State& st) {
+  const TriMesh m = mesh_for(int(st.range(0)));
+  for (auto _ : st) {
+    LaplacianDeformer d;
+    d.setMesh(m);
+    add_handles(d, m, 0.1);
+    benchmark::DoNotOptimize(d.deform());
+  }
+  st.counters["vertices"] = double(m.V.rows());
+}
+BENCHMARK(BM_DeformFactorize)->DenseRange(4, 6)->Unit(benchmark::kMillisecond);
+
+static void BM_DeformResolveMovedTargets(benchmark::State& st) {
+  const TriMesh m = mesh_for(int(st.range(0)));
+  LaplacianDeformer d;
+  d.setMesh(m);
+  add_handles(d, m, 0.1);
+  d.deform();
+  double s = 0;
+  for (auto _ : st) {
+    d.setPositionTarget(0, Eigen::Vector3d(s, 0, 0));
+    s += 1e-3;
+    benchmark::DoNotOptimize(d.deform());
+  }
+  st.counters["vertices"] = double(m.V.rows());
+}
+BENCHMARK(BM_DeformResolveMovedTargets)->DenseRange(4, 6)->Unit(benchmark::kMillisecond);
+
+static void BM_DeformRotationField(benchmark::State& st) {
+  const TriMesh m = mesh_for(int(st.range(0)));
+  for (auto _ : st) {
+    LaplacianDeformer d;
+    d.setMesh(m);
+    add_handles(d, m, 0.1);
+    d.setUseRotationField(true);
+    benchmark::DoNotOptimize(d.deform());
+  }
+  st.counters["vertices"] = double(m.V.rows());
+}
+BENCHMARK(BM_DeformRotationField)->DenseRange(4, 6)->Unit(benchmark::kMillisecond);
+
+static void BM_Factorize(benchmark::State& st, SparseCholesky::Backend backend) {
+  const TriMesh m = mesh_for(int(st.range(0)));
+  const Eigen::SparseMatrix<double> L = laplacian(m.V, m.F);
+  Eigen::SparseMatrix<double> N = Eigen::SparseMatrix<double>(L.transpose() * L);
+  for (int i = 0; i < N.rows(); i += 50) N.coeffRef(i, i) += 1.0;
+  for (auto _ : st) {
+    SparseCholesky s(backend);
+    s.compute(N);
+    benchmark::DoNotOptimize(s.isFactorized());
+  }
+  st.counters["vertices"] = double(m.V.rows());
+}
+BENCHMARK_CAPTURE(BM_Factorize, cholmod, SparseCholesky::Backend::Cholmod)->DenseRange(4, 6)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Factorize, eigen_ldlt, SparseCholesky::Backend::EigenLDLT)->DenseRange(4, 6)->Unit(benchmark::kMillisecond);
+
+BENCHMARK_MAIN();

@@ -1,0 +1,101 @@
+// The `tbsp` executable end to end: exit codes, messages, atomic outputs, reports.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "test_util.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/mesh/primitives.h"
+
+using namespace tbsp;
+
+namespace {
+struct CliResult {
+  int code;
+  std::string err;
+};
+CliResult run(const std::string& args, const std::filesystem::path& dir) {
+  const std::string errf = (dir / "stderr.txt").string();
+  const int rc = std::system((std::string(TBSP_CLI) + " " + args + " >/dev/null 2>" + errf).c_str());
+  std::ifstream in(errf);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, ss.str()};
+}
+}  // namespace
+
+TEST(Cli, DeformWritesMeshAndReport) {
+  const auto dir = test::temp_dir("cli_ok");
+  const std::string out = (dir / "bent.ply").string(), rep = (dir / "r.json").string();
+  const CliResult r = run("deform -q --mesh " + test::sample("bumpy_bar.off") + " --constraints " + test::sample("bend_90.json") +
+                        " --out " + out + " --rotation-field --report " + rep,
+                    dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const TriMesh m = read_mesh(out);
+  EXPECT_EQ(m.V.rows(), read_mesh(test::sample("bumpy_bar.off")).V.rows());
+  nlohmann::json j;
+  std::ifstream(rep) >> j;
+  EXPECT_GT(j["timings_s"]["factorize"].get<double>(), 0.0);
+  EXPECT_GE(j["timings_s"]["solve"].get<double>(), 0.0);
+  EXPECT_EQ(j["counts"]["hard_constraints"].get<int>(), 73);
+  EXPECT_EQ(j["residuals"]["by_type"]["hard"]["max"].get<double>(), 0.0);
+  EXPECT_TRUE(j["solver"]["rotation_field"].get<bool>());
+  EXPECT_EQ(j["residuals"]["constraints"].size(), 146u);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Cli, MalformedInputsFailClearlyAndKeepExistingOutputs) {
+  const auto dir = test::temp_dir("cli_bad");
+  const std::string out = (dir / "out.ply").string();
+  write_mesh(out, make_icosphere(1));
+  const auto before = std::filesystem::last_write_time(out);
+  // truncated mesh
+  const std::string bad = (dir / "bad.off").string();
+  std::ofstream(bad) << "OFF\n4 2 0\n0 0 0\n1 0 0\n";
+  CliResult r = run("deform --mesh " + bad + " --constraints " + test::sample("bend_90.json") + " --out " + out, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find(bad), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("truncated"), std::string::npos) << r.err;
+  // constraint on a missing vertex
+  const std::string cons = (dir / "c.json").string();
+  std::ofstream(cons) << R"({"constraints": [{"vertex": 5, "target": [0,0,0]}, {"vertex": 99999, "target": [1,2,3]}]})";
+  r = run("deform --mesh " + test::sample("bumpy_bar.off") + " --constraints " + cons + " --out " + out, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("constraints[1].vertex"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("99999"), std::string::npos) << r.err;
+  // invalid JSON
+  std::ofstream(cons) << "{ not json";
+  r = run("deform --mesh " + test::sample("bumpy_bar.off") + " --constraints " + cons + " --out " + out, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("not valid JSON"), std::string::npos) << r.err;
+  // under-determined: only a plane constraint
+  std::ofstream(cons) << R"({"constraints": [{"vertex": 5, "type": "plane", "point": [0,0,0], "normal": [0,0,1]}]})";
+  r = run("deform --mesh " + test::sample("bumpy_bar.off") + " --constraints " + cons + " --out " + out, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("free to translate"), std::string::npos) << r.err;
+  EXPECT_EQ(std::filesystem::last_write_time(out), before) << "a failed run must not touch the existing output";
+  EXPECT_EQ(read_mesh(out).V.rows(), make_icosphere(1).V.rows());
+  // validate: exit 4 with --strict on a mesh with problems
+  const std::string dup = (dir / "dup.off").string();
+  std::ofstream(dup) << "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 2\n";
+  EXPECT_EQ(run("validate --strict " + dup, dir).code, 4);
+  EXPECT_EQ(run("validate " + dup, dir).code, 0);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Cli, DemoProducesOutputs) {
+  const auto dir = test::temp_dir("cli_demo");
+  const CliResult r = run("demo -q --out " + (dir / "o").string(), dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const char* f : {"bent_rotation_field.ply", "bent_linear.ply", "demo.png", "report.json"})
+    EXPECT_TRUE(std::filesystem::exists(dir / "o" / f)) << f;
+  nlohmann::json j;
+  std::ifstream(dir / "o" / "report.json") >> j;
+  EXPECT_LT(j["mean_edge_strain"]["rotation_field"].get<double>(), j["mean_edge_strain"]["linear"].get<double>());
+  std::filesystem::remove_all(dir);
+}

@@ -1,0 +1,42 @@
+#pragma once
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "tbsp/mesh/tri_mesh.h"
+
+namespace tbsp::test {
+
+inline std::string shared(const std::string& rel) { return std::string(TBSP_SHARED_DATA_DIR) + "/" + rel; }
+inline std::string sample(const std::string& rel) { return std::string(TBSP_SAMPLE_DATA_DIR) + "/" + rel; }
+
+#define TBSP_REQUIRE_FILE(path)                                                        \
+  do {                                                                                 \
+    if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data missing: " << path; \
+  } while (0)
+
+/// Deterministic farthest-point sampling of k vertices (Euclidean), starting at vertex `start`.
+inline std::vector<int> farthest_points(const Eigen::MatrixX3d& V, int k, int start = 0) {
+  std::vector<int> out{start};
+  Eigen::VectorXd d = (V.rowwise() - V.row(start)).rowwise().norm();
+  while (int(out.size()) < k) {
+    Eigen::Index i;
+    d.maxCoeff(&i);
+    out.push_back(int(i));
+    d = d.cwiseMin((V.rowwise() - V.row(i)).rowwise().norm());
+  }
+  return out;
+}
+
+inline std::filesystem::path temp_dir(const std::string& name) {
+  auto p = std::filesystem::temp_directory_path() / ("tbsp_test_" + name + "_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(p);
+  std::filesystem::create_directories(p);
+  return p;
+}
+
+}  // namespace tbsp::test
