@@ -31,8 +31,8 @@ TEST(CotanLaplacian, SphereGivesMeanCurvatureNormal) {
   const double mean_rel = sum_rel / double(m.V.rows());
   RecordProperty("max_rel_error", std::to_string(max_rel));
   RecordProperty("mean_rel_error", std::to_string(mean_rel));
-  EXPECT_LT(max_rel, 0.02) << "max relative error of delta vs -H n";
-  EXPECT_LT(mean_rel, 0.005);
+  EXPECT_LT(max_rel, 0.005) << "max relative error of delta vs -H n";
+  EXPECT_LT(mean_rel, 0.001);
   // and the error shrinks under refinement (consistency): level 3 is worse than level 5
   const TriMesh c = make_icosphere(3, r);
   const Eigen::MatrixX3d dc = laplacian(c.V, c.F) * c.V;
