@@ -52,6 +52,8 @@ struct LaplacianDeformer::Cache {
   Eigen::Index n_free = 0;
   Eigen::MatrixX3d X0;          // fixed positions (hard targets / isolated rest), 0 elsewhere
   Eigen::SparseMatrix<double> L_free;  // L̂ restricted to free columns (#V by n_free)
+  Eigen::SparseMatrix<double> NL;      // L_freeᵀ L_free, cached while the free set is unchanged
+  std::vector<int> nl_free_index;      // free set NL was built for (empty = invalid)
   std::vector<ScalarRow> rows;  // coupled: every scalar row; uncoupled: one row per position constraint
   SparseCholesky solver;
   // components
@@ -102,6 +104,7 @@ void LaplacianDeformer::setMesh(const TriMesh& mesh) {
   for (Eigen::Index f = 0; f < mesh_.F.rows(); ++f)
     for (int k = 0; k < 3; ++k) cache_->isolated[std::size_t(mesh_.F(f, k))] = 0;
   report_.t_laplacian = seconds_since(t0);
+  cache_->nl_free_index.clear();
   user_rotations_.clear();
   invalidateMatrix();
 }
@@ -319,8 +322,9 @@ void LaplacianDeformer::buildSystem() {
     if (c.free_index[std::size_t(i)] == 0) c.free_index[std::size_t(i)] = int(nf++);
     else c.free_index[std::size_t(i)] = -1;
   c.n_free = nf;
-  // L̂ restricted to the free columns
-  {
+  // L̂ restricted to the free columns and LᵀL: the expensive part, reused while the free set
+  // (hard + isolated vertices) is unchanged, e.g. when only soft constraints or weights change
+  if (c.nl_free_index != c.free_index) {
     std::vector<Eigen::Triplet<double>> t;
     t.reserve(std::size_t(L_.nonZeros()));
     for (int col = 0; col < L_.outerSize(); ++col)
@@ -330,6 +334,8 @@ void LaplacianDeformer::buildSystem() {
       }
     c.L_free.resize(n, nf);
     c.L_free.setFromTriplets(t.begin(), t.end());
+    c.NL = Eigen::SparseMatrix<double>(c.L_free.transpose() * c.L_free);
+    c.nl_free_index = c.free_index;
   }
   // scalar rows
   c.coupled = false;
@@ -355,15 +361,16 @@ void LaplacianDeformer::buildSystem() {
       r.m = n2; c.rows.push_back(r);
     }
   }
-  // normal matrix
-  const Eigen::SparseMatrix<double> NL = Eigen::SparseMatrix<double>(c.L_free.transpose() * c.L_free);
+  // normal matrix: NL (per coordinate) + the constraint terms
+  const Eigen::SparseMatrix<double>& NL = c.NL;
   std::vector<Eigen::Triplet<double>> t;
   const int dims = c.coupled ? 3 : 1;
-  t.reserve(std::size_t(NL.nonZeros()) * std::size_t(dims) + c.rows.size() * 27);
-  for (int d = 0; d < dims; ++d)
-    for (int col = 0; col < NL.outerSize(); ++col)
-      for (Eigen::SparseMatrix<double>::InnerIterator it(NL, col); it; ++it)
-        t.emplace_back(int(d * nf + it.row()), int(d * nf + it.col()), it.value());
+  t.reserve((c.coupled ? std::size_t(NL.nonZeros()) * 3 : 0) + c.rows.size() * 27);
+  if (c.coupled)
+    for (int d = 0; d < 3; ++d)
+      for (int col = 0; col < NL.outerSize(); ++col)
+        for (Eigen::SparseMatrix<double>::InnerIterator it(NL, col); it; ++it)
+          t.emplace_back(int(d * nf + it.row()), int(d * nf + it.col()), it.value());
   for (const auto& r : c.rows) {
     const double w2 = constraints_[std::size_t(r.cid)].weight * constraints_[std::size_t(r.cid)].weight;
     for (auto [va, ba] : r.stencil) {
@@ -383,6 +390,7 @@ void LaplacianDeformer::buildSystem() {
   }
   Eigen::SparseMatrix<double> N(dims * nf, dims * nf);
   N.setFromTriplets(t.begin(), t.end());
+  if (!c.coupled) N += NL;
   report_progress(progress_, 0.3, "factorize");
   const auto t0 = Clock::now();
   if (nf > 0) c.solver.compute(N);

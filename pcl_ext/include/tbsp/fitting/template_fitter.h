@@ -1,0 +1,148 @@
+#pragma once
+/// \file template_fitter.h
+/// \brief Template fitting to point clouds (thesis ch. 5 + §5.5): the non-template kernel behind
+/// tbsp::TemplateFitting<PointT>. Works on Eigen points; see template_fitting.h for the PCL API.
+///
+/// Pipeline (all automatic after the markers):
+///  1. initial deformation with the rotation field (eq. 3.12) from the markers;
+///  2. global scale λ from ratios of Dijkstra geodesics between markers (§5.2), iterated to a
+///     fixed point (the thesis does one step; data ×3 out of scale needs a few) and re-solve;
+///  3. iterative matching (§5.3): per template vertex the cloud points within r_max whose normals
+///     deviate ≤ θ_max, averaged with the quadratic B-spline kernel, projected on the vertex
+///     normal; weighted constraints; re-solve until the largest vertex move < tolerance;
+///     r_max shrinks from `initial` to `final` over the first iterations (coarse-to-fine);
+///     (optionally refreshing the rotation field from the fit, see refine_rotations);
+///  4. displacement propagation (§5.3 end): normal displacements of matched vertices relative to
+///     the initial deformation, harmonically interpolated to unmatched vertices, weight ½;
+///  5. options (§5.5): Laplacian updating per iteration, adaptive 1-to-4 subdivision where the
+///     per-triangle error exceeds ε (+ T-junction repair and valence flips), tangential
+///     area-weighted fairing along the cloud normals (eq. 5.1-5.2).
+
+#include <Eigen/Core>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "tbsp/core/progress.h"
+#include "tbsp/mesh/tri_mesh.h"
+
+namespace tbsp {
+
+/// \brief A user correspondence: template vertex ↔ cloud point (cloud_index >= 0) or a free 3D
+/// position (cloud_index < 0; for markers placed where the scan has no data).
+struct FitMarker {
+  int template_vertex = -1;
+  Eigen::Index cloud_index = -1;
+  Eigen::Vector3d position = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  std::optional<Eigen::Matrix3d> rotation;  ///< optional local frame rotation (template → data)
+  double weight = 1.0;                      ///< relative to FitParameters::marker_weight
+};
+
+struct Sphere { Eigen::Vector3d center = Eigen::Vector3d::Zero(); double radius = 0; };
+struct Box { Eigen::Vector3d min = Eigen::Vector3d::Zero(), max = Eigen::Vector3d::Zero(); };
+
+/// \brief What is excluded from matching. Excluded template vertices get no data constraints
+/// (they follow the template smoothly through the Laplacian); excluded cloud points are never
+/// matched and not counted in the error metrics.
+struct RegionOfInterest {
+  std::vector<int> exclude_template_vertices;
+  std::vector<Sphere> exclude_template_spheres;  ///< in template (rest) coordinates
+  std::vector<Box> exclude_template_boxes;
+  std::vector<Eigen::Index> exclude_cloud_points;
+  std::vector<Sphere> exclude_cloud_spheres;     ///< in cloud coordinates
+  std::vector<Box> exclude_cloud_boxes;
+};
+
+/// \brief Parameters. Lengths of 0 mean "derive from the data" (d = cloud bbox diagonal,
+/// s = median point spacing); the values used are reported back.
+struct FitParameters {
+  double max_match_distance = 0;        ///< r_max (final); 0: max(3 s, 0.5 % d)
+  double initial_match_distance = 0;    ///< r_max of iteration 1; 0: max(r_max, 3 % d)
+  double max_normal_angle_deg = 60;     ///< θ_max
+  /// A match is rejected when the weighted mean of its points lies more than this × r_max away
+  /// from the vertex's normal line (one-sided neighbourhood at the rim of the data: the normal
+  /// projection would be biased). 1 disables the test.
+  double rim_rejection = 0.5;
+  /// Beyond the thesis: project along the vertex normal onto the weighted least-squares plane
+  /// of the matched points instead of onto their weighted mean (same on symmetric
+  /// neighbourhoods; unbiased at the rim of the data and on one-sided neighbourhoods).
+  bool plane_fit = true;
+  int max_iterations = 15;
+  double tolerance = 0;                 ///< stop when the 99th percentile of matched-vertex moves < tol; 0: 2e-4 d
+  double marker_weight = 10;            ///< w of marker constraints
+  double match_weight = 1;              ///< w of data constraints (§5.3)
+  double propagation_weight = 0.5;      ///< w of propagated constraints (§5.3: ½)
+  bool rotation_field = true;           ///< eq. 3.12 from the markers
+  bool estimate_scale = true;           ///< §5.2
+  bool propagate_displacements = true;  ///< §5.3 final step
+  /// Beyond the thesis: from iteration 2 on, re-estimate the rotation field from the current fit
+  /// (per matched vertex the closest rotation of its cotangent-weighted one-ring map, eq. 3.15)
+  /// and interpolate it harmonically into unmatched regions (eq. 3.11), so holes inherit the
+  /// local rotations of their rims instead of those extrapolated from a few markers.
+  bool refine_rotations = false;
+  bool laplacian_updating = false;      ///< §5.5.1
+  double updating_match_weight = 0.5;   ///< data weight with Laplacian updating
+  bool remeshing = false;               ///< §5.5.2 (needs laplacian_updating; changes connectivity)
+  double subdivision_error = 0;         ///< ε; 0: 0.15 % d
+  int max_vertices = 200000;            ///< remeshing stops growing the mesh beyond this
+  bool fairing = false;                 ///< §5.5.3
+  double fairing_lambda = 0.5;          ///< λ of eq. 5.2
+  int fairing_steps = 2;                ///< per iteration
+  int normal_neighbours = 16;           ///< k for normal estimation / cloud normal averaging
+
+  /// Checks ranges; fills `why` with the first problem.
+  bool isValid(std::string* why = nullptr) const;
+};
+
+enum class VertexStatus : unsigned char { Matched = 0, Propagated = 1, Masked = 2, Unmatched = 3 };
+
+struct FitIteration {
+  int iteration = 0;
+  double match_radius = 0;
+  Eigen::Index matched = 0;
+  double max_move = 0;
+  double seconds = 0;
+};
+
+/// \brief Everything reconstruct() reports (also written as the JSON report of `tbsp fit`).
+struct FitReport {
+  enum class Status { Success, NotConverged } status = Status::Success;
+  std::string message;
+  int iterations = 0;
+  std::vector<FitIteration> history;
+  double scale = 1.0;
+  FitParameters used;                    ///< parameters with the derived values filled in
+  Eigen::Index points_total = 0, points_skipped_nonfinite = 0, points_excluded = 0;
+  bool normals_estimated = false;
+  Eigen::Index vertices = 0, faces = 0, matched = 0, propagated = 0, masked = 0;
+  double bbox_diagonal = 0, point_spacing = 0;
+  // metrics over ROI points (cloud → mesh)
+  double hausdorff = 0, hausdorff_rel = 0, rms = 0, mean = 0, p99 = 0;
+  double coverage_vertices = 0;          ///< fraction of (non-masked) template vertices matched
+  double coverage_points = 0;            ///< fraction of ROI points within r_max of the result
+  int flipped_faces = 0;                 ///< faces whose normal opposes the cloud normals nearby
+  // timings (s)
+  double t_normals = 0, t_search = 0, t_initial = 0, t_scale = 0, t_iterations = 0, t_matching = 0,
+         t_solve = 0, t_propagation = 0, t_remeshing = 0, t_fairing = 0, t_metrics = 0, t_total = 0;
+};
+
+/// \brief Fits `templ` to the cloud P (#P by 3) with normals N (#P by 3, or 0 rows: then they
+/// are estimated by PCA over `normal_neighbours` and oriented by the deformed template).
+/// Non-finite points are skipped and counted.
+/// \param[out] result fitted mesh (template connectivity unless remeshing)
+/// \param[out] status per result vertex
+/// \throws InvalidInput for an empty cloud, markers on missing vertices/points, marker sets that
+/// leave the system singular, invalid parameters or an unsuitable template; Cancelled.
+FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N,
+                       const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
+                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress = {});
+
+/// Quadratic B-spline fall-off of §5.3: 1 at t=0, 0 at t>=1, C1 (t = distance / r_max).
+inline double bspline_weight(double t) {
+  if (t >= 1) return 0;
+  if (t < 0.5) return 1 - 2 * t * t;
+  return 2 * (1 - t) * (1 - t);
+}
+
+}  // namespace tbsp

@@ -1,0 +1,39 @@
+#pragma once
+/// \file remeshing.h
+/// \brief Adaptive refinement for template fitting (thesis §5.5.2, Fig. 5.7): 1-to-4 splits of
+/// marked triangles with T-junction repair (red-green closure), and valence-optimising edge flips.
+/// Written by hand: CGAL's refinement/isotropic remeshing do not split by a per-face error flag
+/// and would renumber the vertices, while here old vertices keep their indices (new ones are
+/// appended), so markers and per-vertex state survive.
+
+#include <Eigen/Core>
+#include <vector>
+
+namespace tbsp {
+
+struct SubdivisionResult {
+  Eigen::MatrixX3d V;
+  Eigen::MatrixX3i F;
+  /// per new vertex (index >= old #V): the two old vertices whose edge midpoint it is
+  std::vector<std::pair<int, int>> parents;
+  int red_faces = 0;    ///< faces split 1-to-4
+  int green_faces = 0;  ///< faces split 1-to-2 to repair a T-junction
+};
+
+/// \brief Splits every face with `marked[f]` into 4 and repairs T-junctions: a face with two or
+/// three split edges is split 1-to-4 as well (repeated until closed), a face with one split edge
+/// is bisected. Midpoints are placed at the edge midpoints of V. Old vertex indices are kept.
+/// \pre F is a manifold triangle mesh (boundary allowed), marked.size() == #F.
+SubdivisionResult adaptive_subdivide(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::vector<char>& marked);
+
+/// \brief Flips interior edges where that reduces Σ (valence − 6)² of the four vertices involved
+/// (boundary vertices target 4), Botsch & Kobbelt 2004, skipping flips that would fold the surface
+/// (new face normals deviating more than `max_normal_change_deg` from the old ones) or duplicate
+/// an edge. Up to `sweeps` passes. \returns the number of flips.
+int valence_edge_flips(const Eigen::MatrixX3d& V, Eigen::MatrixX3i& F, int sweeps = 3, double max_normal_change_deg = 30);
+
+/// \brief Number of faces whose normal points against the given reference normals
+/// (n_f · ref_f < 0), i.e. fold-overs; rows of ref with zero length are ignored.
+int count_flipped_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& reference_face_normals);
+
+}  // namespace tbsp

@@ -1,0 +1,605 @@
+#include "tbsp/fitting/template_fitter.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <set>
+
+#include "tbsp/core/error.h"
+#include "tbsp/core/logging.h"
+#include "tbsp/deform/laplacian_deformer.h"
+#include "tbsp/deform/rotation_field.h"
+#include "tbsp/deform/rotations.h"
+#include "tbsp/mesh/cotan_laplacian.h"
+#include "tbsp/mesh/geodesics.h"
+#include "tbsp/mesh/mesh_validation.h"
+#include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/mesh/point_search.h"
+#include "tbsp/mesh/remeshing.h"
+#include "tbsp/mesh/topology.h"
+#include "tbsp/solve/harmonic.h"
+
+namespace tbsp {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+bool inside(const Eigen::Vector3d& p, const std::vector<Sphere>& s, const std::vector<Box>& b) {
+  for (const auto& x : s)
+    if ((p - x.center).norm() <= x.radius) return true;
+  for (const auto& x : b)
+    if ((p.array() >= x.min.array()).all() && (p.array() <= x.max.array()).all()) return true;
+  return false;
+}
+
+// PCA normals over k nearest neighbours (unoriented).
+Eigen::MatrixX3d pca_normals(const PointSearch& tree, int k) {
+  const Eigen::MatrixX3d& P = tree.points();
+  Eigen::MatrixX3d N(P.rows(), 3);
+#pragma omp parallel
+  {
+    std::vector<Eigen::Index> idx;
+    std::vector<double> d2;
+#pragma omp for schedule(dynamic, 512)
+    for (Eigen::Index i = 0; i < P.rows(); ++i) {
+      tree.knn(P.row(i).transpose(), k, idx, d2);
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (auto j : idx) mean += P.row(j).transpose();
+      mean /= double(std::max<std::size_t>(idx.size(), 1));
+      Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+      for (auto j : idx) {
+        const Eigen::Vector3d d = P.row(j).transpose() - mean;
+        C += d * d.transpose();
+      }
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
+      N.row(i) = es.eigenvectors().col(0).transpose();
+    }
+  }
+  return N;
+}
+
+}  // namespace
+
+bool FitParameters::isValid(std::string* why) const {
+  auto bad = [&](const std::string& m) { if (why) *why = m; return false; };
+  if (!(max_match_distance >= 0)) return bad("max_match_distance must be >= 0 (0 = automatic)");
+  if (!(initial_match_distance >= 0)) return bad("initial_match_distance must be >= 0 (0 = automatic)");
+  if (!(max_normal_angle_deg > 0 && max_normal_angle_deg <= 180)) return bad("max_normal_angle_deg must be in (0, 180]");
+  if (max_iterations < 0 || max_iterations > 1000) return bad("max_iterations must be in 0..1000");
+  if (!(tolerance >= 0)) return bad("tolerance must be >= 0 (0 = automatic)");
+  if (!(rim_rejection > 0 && rim_rejection <= 1)) return bad("rim_rejection must be in (0, 1]");
+  if (!(marker_weight > 0) || !(match_weight > 0) || !(propagation_weight > 0) || !(updating_match_weight > 0))
+    return bad("weights must be > 0");
+  if (!(subdivision_error >= 0)) return bad("subdivision_error must be >= 0 (0 = automatic)");
+  if (!(fairing_lambda > 0 && fairing_lambda <= 1)) return bad("fairing_lambda must be in (0, 1]");
+  if (fairing_steps < 0) return bad("fairing_steps must be >= 0");
+  if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
+  if (max_vertices < 4) return bad("max_vertices must be >= 4");
+  return true;
+}
+
+FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
+                       const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
+                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress) {
+  const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
+  const auto t_all = Clock::now();
+  FitReport rep;
+  std::string why;
+  if (!params.isValid(&why)) throw InvalidInput(who + "invalid parameters: " + why);
+  MeshRequirements req;
+  req.allow_nonmanifold = !params.remeshing;
+  require_valid_mesh(templ, req, "tbsp::TemplateFitting::setInputTemplate");
+  if (P_in.rows() == 0) throw InvalidInput(who + "the input cloud is empty; give a cloud with points");
+  if (N_in.rows() != 0 && N_in.rows() != P_in.rows())
+    throw InvalidInput(who + "the normals have " + std::to_string(N_in.rows()) + " rows for " +
+                       std::to_string(P_in.rows()) + " points");
+  report_progress(progress, 0.0, "prepare");
+  // ---- finite points, ROI
+  rep.points_total = P_in.rows();
+  std::vector<Eigen::Index> compact(std::size_t(P_in.rows()), -1);
+  std::vector<Eigen::Index> keep;
+  keep.reserve(std::size_t(P_in.rows()));
+  for (Eigen::Index i = 0; i < P_in.rows(); ++i)
+    if (P_in.row(i).allFinite() && (N_in.rows() == 0 || (N_in.row(i).allFinite() && N_in.row(i).norm() > 0))) {
+      compact[std::size_t(i)] = Eigen::Index(keep.size());
+      keep.push_back(i);
+    }
+  rep.points_skipped_nonfinite = P_in.rows() - Eigen::Index(keep.size());
+  if (keep.empty())
+    throw InvalidInput(who + "the input cloud has no finite points (all " + std::to_string(P_in.rows()) + " are NaN/Inf)");
+  const Eigen::Index np = Eigen::Index(keep.size());
+  Eigen::MatrixX3d P(np, 3), N;
+  for (Eigen::Index i = 0; i < np; ++i) P.row(i) = P_in.row(keep[std::size_t(i)]);
+  std::vector<char> roi_ok(std::size_t(np), 1);
+  for (Eigen::Index e : roi.exclude_cloud_points) {
+    if (e < 0 || e >= P_in.rows())
+      throw InvalidInput(who + "ROI excludes cloud point " + std::to_string(e) + " but the cloud has " +
+                         std::to_string(P_in.rows()) + " points");
+    if (compact[std::size_t(e)] >= 0) roi_ok[std::size_t(compact[std::size_t(e)])] = 0;
+  }
+  for (Eigen::Index i = 0; i < np; ++i)
+    if (inside(P.row(i).transpose(), roi.exclude_cloud_spheres, roi.exclude_cloud_boxes)) roi_ok[std::size_t(i)] = 0;
+  rep.points_excluded = np - std::count(roi_ok.begin(), roi_ok.end(), 1);
+  {
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+    for (Eigen::Index i = 0; i < np; ++i)
+      if (roi_ok[std::size_t(i)]) { lo = lo.cwiseMin(P.row(i).transpose()); hi = hi.cwiseMax(P.row(i).transpose()); }
+    if (rep.points_excluded == np) throw InvalidInput(who + "the region of interest excludes every cloud point");
+    rep.bbox_diagonal = (hi - lo).norm();
+  }
+  const double diag = rep.bbox_diagonal;
+  if (!(diag > 0)) throw InvalidInput(who + "the cloud's points all coincide; nothing to fit");
+  auto t0 = Clock::now();
+  const PointSearch search(P);
+  rep.point_spacing = median_spacing(search);
+  rep.t_search = since(t0);
+  t0 = Clock::now();
+  bool orient = false;
+  if (N_in.rows() == 0) {
+    N = pca_normals(search, params.normal_neighbours);
+    rep.normals_estimated = orient = true;
+  } else {
+    N.resize(np, 3);
+    for (Eigen::Index i = 0; i < np; ++i) N.row(i) = N_in.row(keep[std::size_t(i)]).normalized();
+  }
+  rep.t_normals = since(t0);
+  // ---- derived parameters
+  FitParameters& u = rep.used;
+  u = params;
+  if (u.max_match_distance == 0) u.max_match_distance = std::max(3 * rep.point_spacing, 0.005 * diag);
+  if (u.initial_match_distance == 0) u.initial_match_distance = std::max(u.max_match_distance, 0.03 * diag);
+  if (u.tolerance == 0) u.tolerance = 2e-4 * diag;
+  if (u.subdivision_error == 0) u.subdivision_error = 0.0015 * diag;
+  if (u.remeshing && !u.laplacian_updating) {
+    u.laplacian_updating = true;
+    rep.message += "remeshing implies Laplacian updating (enabled). ";
+  }
+  const double cos_max = std::cos(u.max_normal_angle_deg * M_PI / 180.0);
+  // ---- markers
+  if (markers.empty())
+    throw InvalidInput(who + "no markers: give at least one template vertex <-> cloud point correspondence (3 or more "
+                             "for the rotation field)");
+  const Eigen::Index nv0 = templ.V.rows();
+  std::vector<Eigen::Vector3d> mtarget;
+  std::vector<int> mverts;
+  for (std::size_t k = 0; k < markers.size(); ++k) {
+    const auto& m = markers[k];
+    const std::string w = who + "marker " + std::to_string(k) + ": ";
+    if (m.template_vertex < 0 || m.template_vertex >= nv0)
+      throw InvalidInput(w + "template vertex " + std::to_string(m.template_vertex) + " does not exist (template has " +
+                         std::to_string(nv0) + " vertices)");
+    if (!(m.weight > 0 && std::isfinite(m.weight))) throw InvalidInput(w + "weight must be > 0");
+    Eigen::Vector3d t;
+    if (m.cloud_index >= 0) {
+      if (m.cloud_index >= P_in.rows())
+        throw InvalidInput(w + "cloud point " + std::to_string(m.cloud_index) + " does not exist (cloud has " +
+                           std::to_string(P_in.rows()) + " points)");
+      if (!P_in.row(m.cloud_index).allFinite())
+        throw InvalidInput(w + "cloud point " + std::to_string(m.cloud_index) + " is NaN/Inf; pick another point");
+      t = P_in.row(m.cloud_index).transpose();
+    } else {
+      if (!m.position.allFinite())
+        throw InvalidInput(w + "needs a cloud_index or a finite free position");
+      t = m.position;
+    }
+    mtarget.push_back(t);
+    mverts.push_back(m.template_vertex);
+  }
+  // ---- template mask
+  std::vector<char> masked(std::size_t(nv0), 0);
+  for (int v : roi.exclude_template_vertices) {
+    if (v < 0 || v >= nv0)
+      throw InvalidInput(who + "ROI excludes template vertex " + std::to_string(v) + " but the template has " +
+                         std::to_string(nv0) + " vertices");
+    masked[std::size_t(v)] = 1;
+  }
+  for (Eigen::Index v = 0; v < nv0; ++v)
+    if (inside(templ.V.row(v).transpose(), roi.exclude_template_spheres, roi.exclude_template_boxes)) masked[std::size_t(v)] = 1;
+
+  // ---- stage 1: initial deformation + global scale
+  report_progress(progress, 0.05, "initial deformation");
+  t0 = Clock::now();
+  LaplacianDeformer D;
+  D.setMesh(templ);
+  auto add_markers = [&](LaplacianDeformer& d) {
+    for (std::size_t k = 0; k < markers.size(); ++k) {
+      DeformConstraint c;
+      c.at = SurfacePoint::atVertex(mverts[k]);
+      c.target = mtarget[k];
+      c.weight = u.marker_weight * markers[k].weight;
+      c.rotation = markers[k].rotation;
+      d.addConstraint(c);
+    }
+  };
+  add_markers(D);
+  bool field = u.rotation_field;
+  if (field) {
+    std::set<int> distinct(mverts.begin(), mverts.end());
+    bool all_rot = std::all_of(markers.begin(), markers.end(), [](const FitMarker& m) { return bool(m.rotation); });
+    if (distinct.size() < 3 && !all_rot) {
+      field = false;
+      rep.message += "rotation field skipped: it needs 3 or more markers (or marker rotations). ";
+      logger()->warn("[TemplateFitting] fewer than 3 markers: no rotation field");
+    }
+  }
+  D.setUseRotationField(field);
+  Eigen::MatrixX3d V;
+  try {
+    V = D.deform();
+  } catch (const InvalidInput& e) {
+    throw InvalidInput(who + "the markers cannot pose the template: " + e.what());
+  }
+  rep.t_initial = since(t0);
+  t0 = Clock::now();
+  double lambda = 1.0;
+  if (u.estimate_scale) {
+    std::set<int> distinct(mverts.begin(), mverts.end());
+    if (distinct.size() >= 2) {
+      // λ = mean ratio of marker geodesics on the posed template to those on the rest template
+      // (§5.2). Iterated to the self-consistent value: the re-solved shape with scale λ has
+      // geodesic ratio λ (the thesis does one step; data far out of scale needs a few).
+      for (int k = 0; k < 8; ++k) {
+        const double ratio = global_scale_from_geodesics(templ.V, V, templ.F, mverts);
+        if (!(ratio > 0 && std::isfinite(ratio))) break;
+        const double change = std::abs(ratio / lambda - 1);
+        lambda = ratio;
+        D.setScale(lambda);
+        V = D.deform();
+        if (change < 2e-3) break;
+      }
+    } else {
+      rep.message += "scale not estimated: it needs 2 or more distinct markers. ";
+    }
+  }
+  rep.scale = lambda;
+  rep.t_scale = since(t0);
+  if (!D.lastRotations().empty()) D.setRotations(D.lastRotations());  // freeze the field
+  Eigen::MatrixX3d V0 = V;
+  Eigen::MatrixX3i F = templ.F;
+  const Eigen::SparseMatrix<double> Ct = cotangent_matrix(templ.V, templ.F);  // for refine_rotations
+
+  // ---- orient estimated normals by the posed template
+  if (orient) {
+    const PointSearch vt(V);
+    const Eigen::MatrixX3d VN = vertex_normals(V, F);
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index i = 0; i < np; ++i) {
+      const Eigen::Index j = vt.nearest(P.row(i).transpose());
+      if (j >= 0 && N.row(i).dot(VN.row(j)) < 0) N.row(i) *= -1;
+    }
+  }
+
+  // ---- stage 2: iterative matching
+  std::vector<char> matched(std::size_t(V.rows()), 0);
+  Eigen::MatrixX3d target = V;
+  bool converged = false;
+  const auto t_it = Clock::now();
+  for (int it = 1; it <= u.max_iterations; ++it) {
+    const auto t_iter = Clock::now();
+    report_progress(progress, 0.1 + 0.75 * double(it - 1) / std::max(u.max_iterations, 1), "matching");
+    const double frac = std::min(1.0, double(it - 1) / 3.0);
+    const double r = u.initial_match_distance * std::pow(u.max_match_distance / u.initial_match_distance, frac);
+    auto tm = Clock::now();
+    const Eigen::MatrixX3d VN = vertex_normals(V, F);
+    const std::vector<char> prev_matched = matched;
+    std::fill(matched.begin(), matched.end(), 0);
+    matched.resize(std::size_t(V.rows()), 0);
+    target = V;
+    Eigen::VectorXd match_scale = Eigen::VectorXd::Ones(V.rows());
+#pragma omp parallel
+    {
+      std::vector<std::pair<Eigen::Index, double>> nb;
+#pragma omp for schedule(dynamic, 256)
+      for (Eigen::Index j = 0; j < V.rows(); ++j) {
+        if (masked[std::size_t(j)]) continue;
+        const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
+        if (nj.squaredNorm() == 0) continue;
+        // expanding search: the scheduled radius first (precision), then doubled up to the
+        // initial radius for vertices the fit has not brought close to the data yet (reach)
+        bool found = false;
+        Eigen::Vector3d q;
+        double used_r = r;
+        for (double rr = r; rr <= u.initial_match_distance * 1.0001 && !found; rr *= 2) {
+          search.radius(vj, rr, nb);
+          double sw = 0;
+          Eigen::Vector3d sp = Eigen::Vector3d::Zero();
+          Eigen::Matrix3d spp = Eigen::Matrix3d::Zero();
+          for (const auto& [k, d2] : nb) {
+            if (!roi_ok[std::size_t(k)] || N.row(k).dot(nj) < cos_max) continue;
+            const double w = bspline_weight(std::sqrt(d2) / rr);
+            const Eigen::Vector3d pk = P.row(k).transpose();
+            sw += w;
+            sp += w * pk;
+            spp += w * pk * pk.transpose();
+          }
+          if (sw <= 0) continue;
+          q = sp / sw;  // weighted average of §5.3
+          const Eigen::Vector3d off = (q - vj) - (q - vj).dot(nj) * nj;
+          if (u.plane_fit && nb.size() >= 6) {
+            // weighted plane through q: the normal line of the vertex meets it at the projection
+            // (unbiased for one-sided neighbourhoods at the rim of the data)
+            Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(spp / sw - q * q.transpose());
+            Eigen::Vector3d m = es.eigenvectors().col(0);
+            if (m.dot(nj) < 0) m = -m;
+            if (m.dot(nj) > 0.7 && es.eigenvalues()(1) > 4 * es.eigenvalues()(0)) q = vj + ((q - vj).dot(m) / m.dot(nj)) * nj;
+            else q = vj + (q - vj).dot(nj) * nj;
+          }
+          // one-sided neighbourhood far beyond the rim of the data: no match
+          found = off.norm() <= u.rim_rejection * rr;
+          used_r = rr;
+          if (rr >= u.initial_match_distance) break;
+        }
+        if (!found) continue;
+        // a step of at most the scheduled radius, and matches found only at an expanded radius
+        // count less: targets then vary continuously with the shape and the iteration settles
+        const double d = std::clamp((q - vj).dot(nj), -r, r);
+        target.row(j) = (vj + d * nj).transpose();
+        match_scale(j) = (r / used_r) * (r / used_r);
+        matched[std::size_t(j)] = 1;
+      }
+    }
+    rep.t_matching += since(tm);
+    const Eigen::Index n_matched = std::count(matched.begin(), matched.end(), 1);
+    if (logger()->should_log(spdlog::level::trace)) {
+      Eigen::Index flips = 0;
+      for (std::size_t j = 0; j < matched.size() && j < prev_matched.size(); ++j) flips += matched[j] != prev_matched[j];
+      logger()->trace("[TemplateFitting] it {} r {:.4f}% matched {} flips {}", it, 100 * r / diag, n_matched, flips);
+    }
+    tm = Clock::now();
+    double w_data = u.match_weight;
+    if (u.laplacian_updating) {
+      TriMesh cur;
+      cur.V = V;
+      cur.F = F;
+      D.setMesh(cur);  // §5.5.1: the Laplacian system of the current shape
+      D.setScale(1.0);
+      w_data = u.updating_match_weight;
+    }
+    if (u.refine_rotations && !u.laplacian_updating && it >= 2) {
+      // rotation field from the current fit: local rotations at matched vertices and markers,
+      // harmonically interpolated elsewhere
+      std::vector<int> nodes;
+      std::vector<Eigen::Matrix3d> rots;
+      std::vector<char> is_node(std::size_t(V.rows()), 0);
+      for (Eigen::Index j = 0; j < V.rows(); ++j) if (matched[std::size_t(j)]) is_node[std::size_t(j)] = 1;
+      for (int mv : mverts) is_node[std::size_t(mv)] = 1;
+      for (int k = 0; k < Ct.outerSize(); ++k) {
+        if (!is_node[std::size_t(k)]) continue;
+        Eigen::Matrix3d S = Eigen::Matrix3d::Zero();
+        for (Eigen::SparseMatrix<double>::InnerIterator itc(Ct, k); itc; ++itc) {
+          if (itc.row() == k) continue;
+          const Eigen::Vector3d e0 = (templ.V.row(itc.row()) - templ.V.row(k)).transpose();
+          const Eigen::Vector3d e1 = (V.row(itc.row()) - V.row(k)).transpose();
+          S += std::abs(itc.value()) * e1 * e0.transpose();
+        }
+        nodes.push_back(k);
+        rots.push_back(closest_rotation(S));
+      }
+      try {
+        RotationField rf;
+        rf.compute(templ.V, F, nodes);
+        D.setRotations(rf.interpolate(rots));
+      } catch (const InvalidInput&) {
+        // a component without nodes: keep the previous field
+      }
+    }
+    D.clearConstraints();
+    add_markers(D);
+    for (Eigen::Index j = 0; j < V.rows(); ++j)
+      if (matched[std::size_t(j)])
+        D.addPositionConstraint(SurfacePoint::atVertex(int(j)), target.row(j).transpose(), w_data * std::sqrt(match_scale(j)));
+    const Eigen::MatrixX3d Vn = D.deform();
+    rep.t_solve += since(tm);
+    const Eigen::VectorXd moves = (Vn - V).rowwise().norm();
+    // convergence is judged on the data-supported vertices: unmatched regions (holes) are
+    // floppy and keep swinging slowly as a whole while the matched ones have settled
+    double move = 0;
+    // (99th percentile: a handful of vertices in 2-cycles through their own normals must not
+    // keep the whole fit from converging)
+    Eigen::Index arg = 0;
+    std::vector<double> mm;
+    for (Eigen::Index j = 0; j < moves.rows(); ++j)
+      if (matched[std::size_t(j)]) {
+        mm.push_back(moves(j));
+        if (moves(j) > moves(arg)) arg = j;
+      }
+    if (!mm.empty()) {
+      const std::size_t k = std::size_t(0.99 * double(mm.size() - 1));
+      std::nth_element(mm.begin(), mm.begin() + long(k), mm.end());
+      move = mm[k];
+    }
+    if (logger()->should_log(spdlog::level::trace)) {
+      logger()->trace("[TemplateFitting] it {} max matched move {:.4f}% at vertex {} (target dist {:.4f}%), #moving>0.1%d {}", it,
+                      100 * move / diag, arg, 100 * (target.row(arg) - V.row(arg)).norm() / diag, (moves.array() > 1e-3 * diag).count());
+    }
+    V = Vn;
+    bool remeshed = false;
+    if (u.remeshing && V.rows() < u.max_vertices && it >= 2 && it < u.max_iterations) {
+      tm = Clock::now();
+      const MeshDistance md(V, F);
+      Eigen::VectorXi face;
+      const Eigen::VectorXd dist = md.distances(P, &face);
+      Eigen::VectorXd sum = Eigen::VectorXd::Zero(F.rows());
+      Eigen::VectorXi cnt = Eigen::VectorXi::Zero(F.rows());
+      for (Eigen::Index i = 0; i < np; ++i)
+        if (roi_ok[std::size_t(i)] && dist(i) < r) { sum(face(i)) += dist(i); ++cnt(face(i)); }
+      std::vector<char> mark(std::size_t(F.rows()), 0);
+      int n_mark = 0;
+      for (Eigen::Index f = 0; f < F.rows(); ++f)
+        if (cnt(f) > 0 && sum(f) / cnt(f) > u.subdivision_error) { mark[std::size_t(f)] = 1; ++n_mark; }
+      if (n_mark > 0) {
+        SubdivisionResult sub = adaptive_subdivide(V, F, mark);
+        valence_edge_flips(sub.V, sub.F);
+        const Eigen::Index old_n = V.rows();
+        V0.conservativeResize(sub.V.rows(), 3);
+        masked.resize(std::size_t(sub.V.rows()), 0);
+        for (std::size_t k = 0; k < sub.parents.size(); ++k) {
+          const auto [a, b] = sub.parents[k];
+          V0.row(old_n + Eigen::Index(k)) = 0.5 * (V0.row(a) + V0.row(b));
+          masked[std::size_t(old_n) + k] = masked[std::size_t(a)] && masked[std::size_t(b)];
+        }
+        V = sub.V;
+        F = sub.F;
+        matched.assign(std::size_t(V.rows()), 0);
+        remeshed = true;
+      }
+      rep.t_remeshing += since(tm);
+    }
+    if (u.fairing && u.fairing_steps > 0) {
+      tm = Clock::now();
+      const auto adj = vertex_adjacency(F, V.rows());
+      for (int s = 0; s < u.fairing_steps; ++s) {
+        const Eigen::VectorXd A = voronoi_areas(V, F);
+        const Eigen::MatrixX3d VN2 = vertex_normals(V, F);
+        // sharp features (thin rims): the one-ring centroid lies inwards and the tangent plane
+        // would let the rim slide in; such vertices are left alone
+        const Eigen::MatrixX3d FN2 = face_normals(V, F);
+        std::vector<char> sharp(std::size_t(V.rows()), 0);
+        for (Eigen::Index f = 0; f < F.rows(); ++f)
+          for (int k = 0; k < 3; ++k)
+            if (FN2.row(f).dot(VN2.row(F(f, k))) < std::cos(M_PI / 6)) sharp[std::size_t(F(f, k))] = 1;
+        Eigen::MatrixX3d Vf = V;
+#pragma omp parallel
+        {
+          std::vector<Eigen::Index> idx;
+          std::vector<double> d2;
+#pragma omp for schedule(dynamic, 256)
+          for (Eigen::Index i = 0; i < V.rows(); ++i) {
+            const auto& nb = adj[std::size_t(i)];
+            if (nb.empty() || masked[std::size_t(i)] || !matched[std::size_t(i)] || sharp[std::size_t(i)]) continue;
+            double mean_edge = 0;
+            for (int j : nb) mean_edge += (V.row(j) - V.row(i)).norm();
+            mean_edge /= double(nb.size());
+            Eigen::Vector3d g = Eigen::Vector3d::Zero();
+            double sa = 0;
+            for (int j : nb) { g += A(j) * V.row(j).transpose(); sa += A(j); }
+            if (!(sa > 0)) continue;
+            g /= sa;  // eq. 5.1
+            // normal of the target surface: average of the nearest cloud normals (if close)
+            Eigen::Vector3d n = VN2.row(i).transpose();
+            search.knn(V.row(i).transpose(), u.normal_neighbours, idx, d2);
+            Eigen::Vector3d cn = Eigen::Vector3d::Zero();
+            for (std::size_t k = 0; k < idx.size(); ++k)  // same side only (thin parts!)
+              if (d2[k] < r * r && N.row(idx[k]).dot(n) > cos_max) cn += N.row(idx[k]).transpose();
+            if (cn.norm() > 0) n = cn.normalized();
+            const Eigen::Vector3d dv = g - V.row(i).transpose();
+            Eigen::Vector3d step = u.fairing_lambda * (dv - n * n.dot(dv));  // eq. 5.2
+            if (step.norm() > 0.25 * mean_edge) step *= 0.25 * mean_edge / step.norm();
+            Vf.row(i) += step.transpose();
+          }
+        }
+        V = Vf;
+      }
+      rep.t_fairing += since(tm);
+    }
+    rep.history.push_back({it, r, n_matched, move, since(t_iter)});
+    rep.iterations = it;
+    logger()->debug("[TemplateFitting] iteration {}: r={:.4g}, matched {}, max move {:.3g}", it, r, n_matched, move);
+    if (move < u.tolerance && !remeshed && frac >= 1.0) { converged = true; break; }
+  }
+  rep.t_iterations = since(t_it);
+  if (!converged && u.max_iterations > 0) {
+    rep.status = FitReport::Status::NotConverged;
+    rep.message += "stopped after max_iterations (" + std::to_string(u.max_iterations) + ") before the largest vertex move fell below the tolerance. ";
+  }
+
+  // ---- stage 3: displacement propagation (§5.3)
+  status.assign(std::size_t(V.rows()), VertexStatus::Unmatched);
+  for (Eigen::Index j = 0; j < V.rows(); ++j) {
+    if (masked[std::size_t(j)]) status[std::size_t(j)] = VertexStatus::Masked;
+    else if (matched[std::size_t(j)]) status[std::size_t(j)] = VertexStatus::Matched;
+  }
+  if (u.propagate_displacements && u.max_iterations > 0) {
+    t0 = Clock::now();
+    report_progress(progress, 0.88, "propagation");
+    std::vector<int> m_idx;
+    for (Eigen::Index j = 0; j < V.rows(); ++j)
+      if (status[std::size_t(j)] == VertexStatus::Matched) m_idx.push_back(int(j));
+    const bool any_unmatched = std::any_of(status.begin(), status.end(), [](VertexStatus s) { return s == VertexStatus::Unmatched; });
+    if (!m_idx.empty() && any_unmatched) {
+      const Eigen::MatrixX3d N0 = vertex_normals(V0, F);
+      Eigen::MatrixXd d(Eigen::Index(m_idx.size()), 1);
+      for (std::size_t k = 0; k < m_idx.size(); ++k)
+        d(Eigen::Index(k), 0) = (V.row(m_idx[k]) - V0.row(m_idx[k])).dot(N0.row(m_idx[k]));
+      Eigen::MatrixXd dense;
+      try {
+        dense = harmonic_interpolation(V0, F, m_idx, d);
+      } catch (const InvalidInput&) {
+        dense.resize(0, 1);  // a component without matches: nothing to propagate there
+        rep.message += "displacement propagation skipped (a mesh component has no matched vertex). ";
+      }
+      if (dense.rows() == V.rows()) {
+        D.clearConstraints();
+        add_markers(D);
+        for (Eigen::Index j = 0; j < V.rows(); ++j) {
+          if (status[std::size_t(j)] == VertexStatus::Matched)
+            D.addPositionConstraint(SurfacePoint::atVertex(int(j)), target.row(j).transpose(),
+                                    u.laplacian_updating ? u.updating_match_weight : u.match_weight);
+          else if (status[std::size_t(j)] == VertexStatus::Unmatched) {
+            D.addPositionConstraint(SurfacePoint::atVertex(int(j)), (V0.row(j) + dense(j, 0) * N0.row(j)).transpose(),
+                                    u.propagation_weight);
+            status[std::size_t(j)] = VertexStatus::Propagated;
+          }
+        }
+        V = D.deform();
+      }
+    }
+    rep.t_propagation = since(t0);
+  }
+
+  // ---- metrics (cloud ROI -> result)
+  report_progress(progress, 0.95, "metrics");
+  t0 = Clock::now();
+  {
+    const MeshDistance md(V, F);
+    Eigen::MatrixX3d Q(rep.points_total, 3);
+    Eigen::Index nq = 0;
+    for (Eigen::Index i = 0; i < np; ++i)
+      if (roi_ok[std::size_t(i)]) Q.row(nq++) = P.row(i);
+    Q.conservativeResize(nq, 3);
+    const Eigen::VectorXd dist = md.distances(Q);
+    rep.hausdorff = dist.maxCoeff();
+    rep.hausdorff_rel = rep.hausdorff / diag;
+    rep.mean = dist.mean();
+    rep.rms = std::sqrt(dist.squaredNorm() / double(nq));
+    std::vector<double> s(dist.data(), dist.data() + nq);
+    std::nth_element(s.begin(), s.begin() + long(0.99 * double(nq - 1)), s.end());
+    rep.p99 = s[std::size_t(0.99 * double(nq - 1))];
+    rep.coverage_points = double((dist.array() <= u.max_match_distance).count()) / double(nq);
+    // fold-overs: face normal against the cloud normals near the face centre
+    const Eigen::MatrixX3d FN = face_normals(V, F);
+    int flipped = 0;
+#pragma omp parallel for reduction(+ : flipped)
+    for (Eigen::Index f = 0; f < F.rows(); ++f) {
+      const Eigen::Vector3d c = (V.row(F(f, 0)) + V.row(F(f, 1)) + V.row(F(f, 2))).transpose() / 3.0;
+      double d2 = 0;
+      const Eigen::Index k = search.nearest(c, &d2);
+      if (k >= 0 && roi_ok[std::size_t(k)] && d2 < u.max_match_distance * u.max_match_distance && FN.row(f).dot(N.row(k)) < -0.5)
+        ++flipped;
+    }
+    rep.flipped_faces = flipped;
+  }
+  rep.t_metrics = since(t0);
+  rep.vertices = V.rows();
+  rep.faces = F.rows();
+  Eigen::Index active = 0;
+  for (auto s : status) {
+    rep.matched += s == VertexStatus::Matched;
+    rep.propagated += s == VertexStatus::Propagated;
+    rep.masked += s == VertexStatus::Masked;
+    active += s != VertexStatus::Masked;
+  }
+  rep.coverage_vertices = active ? double(rep.matched) / double(active) : 0;
+  result.V = V;
+  result.F = F;
+  result.N.resize(0, 3);
+  result.C.resize(0, 3);
+  rep.t_total = since(t_all);
+  report_progress(progress, 1.0, "done");
+  return rep;
+}
+
+}  // namespace tbsp

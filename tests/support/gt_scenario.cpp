@@ -1,0 +1,182 @@
+#include "gt_scenario.h"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <numeric>
+#include <random>
+
+#include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/mesh/point_search.h"
+
+namespace tbsp::test {
+
+namespace {
+struct Frame {
+  Eigen::Vector3d c, axis, perp;
+  double length;
+};
+Frame principal_frame(const Eigen::MatrixX3d& V) {
+  Frame f;
+  f.c = V.colwise().mean().transpose();
+  const Eigen::MatrixX3d X = V.rowwise() - f.c.transpose();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(X.transpose() * X);
+  f.axis = es.eigenvectors().col(2);
+  f.perp = es.eigenvectors().col(1);
+  const Eigen::VectorXd s = X * f.axis;
+  f.length = s.maxCoeff() - s.minCoeff();
+  return f;
+}
+}  // namespace
+
+Eigen::MatrixX3d bend_twist_scale(const Eigen::MatrixX3d& V, const ScenarioOptions& o) {
+  const Frame f = principal_frame(V);
+  const double diag = bbox_diagonal(V);
+  const Eigen::Vector3d bend_axis = f.axis.cross(f.perp).normalized();
+  Eigen::MatrixX3d out(V.rows(), 3);
+  for (Eigen::Index i = 0; i < V.rows(); ++i) {
+    const Eigen::Vector3d u = V.row(i).transpose() - f.c;
+    const double t = u.dot(f.axis) / f.length;  // about -0.5 .. 0.5
+    const Eigen::Matrix3d R = (Eigen::AngleAxisd(o.bend_deg * M_PI / 180 * t, bend_axis) *
+                               Eigen::AngleAxisd(o.twist_deg * M_PI / 180 * t, f.axis))
+                                  .toRotationMatrix();
+    out.row(i) = (o.scale * (R * u) + f.c + o.translation * diag).transpose();
+  }
+  return out;
+}
+
+Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
+  Scenario s;
+  s.templ = templ;
+  s.target = bend_twist_scale(templ.V, o);
+  s.diag = bbox_diagonal(s.target);
+  std::mt19937 rng(o.seed);
+  const Eigen::MatrixX3i& F = templ.F;
+  // hole: faces whose rest centroid lies beyond a plane along the second principal axis
+  const Frame fr = principal_frame(templ.V);
+  Eigen::VectorXd key(F.rows()), area(F.rows());
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    const Eigen::Vector3d c = (templ.V.row(F(f, 0)) + templ.V.row(F(f, 1)) + templ.V.row(F(f, 2))).transpose() / 3.0;
+    key(f) = (c - fr.c).dot(fr.perp);
+    const Eigen::Vector3d a = s.target.row(F(f, 0)), b = s.target.row(F(f, 1)), d = s.target.row(F(f, 2));
+    area(f) = 0.5 * (b - a).cross(d - a).norm();
+  }
+  std::vector<Eigen::Index> order(std::size_t(F.rows()));
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return key(a) > key(b); });
+  std::vector<char> hole_face(std::size_t(F.rows()), 0);
+  const double total = area.sum();
+  double removed = 0;
+  for (Eigen::Index f : order) {
+    if (removed >= o.hole * total) break;
+    hole_face[std::size_t(f)] = 1;
+    removed += area(f);
+  }
+  s.hole_area_fraction = removed / total;
+  s.hole_vertex.assign(std::size_t(templ.V.rows()), 1);
+  std::vector<char> touched(std::size_t(templ.V.rows()), 0);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      touched[std::size_t(F(f, k))] = 1;
+      if (!hole_face[std::size_t(f)]) s.hole_vertex[std::size_t(F(f, k))] = 0;
+    }
+  for (std::size_t v = 0; v < touched.size(); ++v)
+    if (!touched[v]) s.hole_vertex[v] = 0;
+  // area-weighted samples on the kept part of the target
+  std::vector<double> cdf;
+  std::vector<Eigen::Index> faces;
+  double acc = 0;
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    if (!hole_face[std::size_t(f)]) { acc += area(f); cdf.push_back(acc); faces.push_back(f); }
+  const int n_out = int(std::lround(o.points * o.outliers));
+  const int n_in = o.points - n_out;
+  std::uniform_real_distribution<double> uni(0, 1);
+  std::normal_distribution<double> gauss(0, o.noise * s.diag);
+  Eigen::MatrixX3d P(o.points, 3), N(o.points, 3), C(o.points, 3);
+  std::vector<char> inl(std::size_t(o.points), 0);
+  const Eigen::Vector3d lo = s.target.colwise().minCoeff().transpose(), hi = s.target.colwise().maxCoeff().transpose();
+  const Eigen::Vector3d split_dir = fr.axis;
+  for (int i = 0; i < n_in; ++i) {
+    const double r = uni(rng) * acc;
+    const Eigen::Index f = faces[std::size_t(std::lower_bound(cdf.begin(), cdf.end(), r) - cdf.begin())];
+    double a = uni(rng), b = uni(rng);
+    if (a + b > 1) { a = 1 - a; b = 1 - b; }
+    const Eigen::Vector3d p0 = s.target.row(F(f, 0)), p1 = s.target.row(F(f, 1)), p2 = s.target.row(F(f, 2));
+    const Eigen::Vector3d p = p0 + a * (p1 - p0) + b * (p2 - p0);
+    Eigen::Vector3d q = p + Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
+    if (o.fragment_offset > 0 && (p - 0.5 * (lo + hi)).dot(split_dir) > 0) q += o.fragment_offset * s.diag * Eigen::Vector3d(1, 1, 1).normalized();
+    P.row(i) = q.transpose();
+    N.row(i) = (p1 - p0).cross(p2 - p0).normalized().transpose();
+    C.row(i) = p.transpose();
+    inl[std::size_t(i)] = 1;
+  }
+  for (int i = n_in; i < o.points; ++i) {
+    const Eigen::Vector3d ext = 0.1 * (hi - lo);
+    Eigen::Vector3d q;
+    for (int d = 0; d < 3; ++d) q(d) = lo(d) - ext(d) + uni(rng) * (hi(d) - lo(d) + 2 * ext(d));
+    P.row(i) = q.transpose();
+    N.row(i) = Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng)).normalized().transpose();
+    C.row(i).setConstant(std::numeric_limits<double>::quiet_NaN());
+  }
+  // deterministic shuffle
+  std::vector<int> perm(std::size_t(o.points));
+  std::iota(perm.begin(), perm.end(), 0);
+  std::shuffle(perm.begin(), perm.end(), rng);
+  s.P.resize(o.points, 3); s.N.resize(o.points, 3); s.clean.resize(o.points, 3);
+  s.inlier.resize(std::size_t(o.points));
+  for (int i = 0; i < o.points; ++i) {
+    s.P.row(i) = P.row(perm[std::size_t(i)]);
+    s.N.row(i) = N.row(perm[std::size_t(i)]);
+    s.clean.row(i) = C.row(perm[std::size_t(i)]);
+    s.inlier[std::size_t(i)] = inl[std::size_t(perm[std::size_t(i)])];
+  }
+  // markers: farthest points on the template outside the hole, each tied to the nearest inlier
+  Eigen::MatrixX3d inP(n_in, 3);
+  std::vector<Eigen::Index> in_idx;
+  for (int i = 0; i < o.points; ++i)
+    if (s.inlier[std::size_t(i)]) { inP.row(Eigen::Index(in_idx.size())) = s.P.row(i); in_idx.push_back(i); }
+  const PointSearch tree(inP);
+  std::vector<int> chosen;
+  Eigen::VectorXd d = Eigen::VectorXd::Constant(templ.V.rows(), 1e300);
+  int start = 0;
+  while (s.hole_vertex[std::size_t(start)]) ++start;
+  chosen.push_back(start);
+  while (int(chosen.size()) < o.markers) {
+    d = d.cwiseMin((templ.V.rowwise() - templ.V.row(chosen.back())).rowwise().norm());
+    Eigen::Index best = -1;
+    for (Eigen::Index v = 0; v < templ.V.rows(); ++v)
+      if (!s.hole_vertex[std::size_t(v)] && !touched.empty() && touched[std::size_t(v)] && (best < 0 || d(v) > d(best))) best = v;
+    chosen.push_back(int(best));
+  }
+  for (int v : chosen) {
+    FitMarker m;
+    m.template_vertex = v;
+    m.cloud_index = in_idx[std::size_t(tree.nearest(s.target.row(v).transpose()))];
+    s.markers.push_back(m);
+  }
+  return s;
+}
+
+ScenarioErrors evaluate(const Scenario& s, const TriMesh& fit) {
+  ScenarioErrors e{};
+  const MeshDistance md(fit.V, fit.F);
+  std::vector<Eigen::Index> in;
+  for (std::size_t i = 0; i < s.inlier.size(); ++i)
+    if (s.inlier[i]) in.push_back(Eigen::Index(i));
+  Eigen::MatrixX3d C(Eigen::Index(in.size()), 3), Q(Eigen::Index(in.size()), 3);
+  for (std::size_t k = 0; k < in.size(); ++k) { C.row(Eigen::Index(k)) = s.clean.row(in[k]); Q.row(Eigen::Index(k)) = s.P.row(in[k]); }
+  e.hausdorff_clean_rel = md.distances(C).maxCoeff() / s.diag;
+  e.hausdorff_noisy_rel = md.distances(Q).maxCoeff() / s.diag;
+  if (fit.V.rows() == s.target.rows()) {
+    const Eigen::VectorXd err = (fit.V - s.target).rowwise().norm();
+    double sum = 0;
+    int n = 0;
+    for (Eigen::Index v = 0; v < err.rows(); ++v)
+      if (s.hole_vertex[std::size_t(v)]) { sum += err(v); ++n; }
+    e.hole_mean_rel = n ? sum / n / s.diag : 0;
+    e.all_mean_rel = err.mean() / s.diag;
+  }
+  return e;
+}
+
+}  // namespace tbsp::test

@@ -1,0 +1,52 @@
+#pragma once
+// Ground-truth fitting scenarios built from a real mesh (tests, benchmarks, docs table).
+#include <Eigen/Core>
+#include <vector>
+
+#include "tbsp/fitting/template_fitter.h"
+#include "tbsp/mesh/tri_mesh.h"
+
+namespace tbsp::test {
+
+struct ScenarioOptions {
+  double bend_deg = 60, twist_deg = 60, scale = 2.0;
+  Eigen::Vector3d translation = Eigen::Vector3d(0.3, -0.2, 0.1);  // × template bbox diagonal
+  int points = 30000;
+  double noise = 0.002;            // Gaussian σ as a fraction of the target's bbox diagonal
+  double outliers = 0.10;          // fraction of the final cloud that is uniform outliers
+  double hole = 0.25;              // fraction of the surface area removed
+  int markers = 20;
+  double fragment_offset = 0.0;    // > 0: split the cloud in two halves, shift one by this × diag
+  unsigned seed = 1;
+};
+
+struct Scenario {
+  TriMesh templ;                   // the undeformed real mesh
+  Eigen::MatrixX3d target;         // ground truth: deformed template vertices
+  Eigen::MatrixX3d P, N;           // the cloud (inliers then outliers, shuffled deterministically)
+  std::vector<char> inlier;        // per cloud point
+  Eigen::MatrixX3d clean;          // noise-free position of each inlier point (rows as P; outliers NaN)
+  std::vector<char> hole_vertex;   // template vertices whose whole one-ring lies in the hole
+  double hole_area_fraction = 0;
+  std::vector<FitMarker> markers;
+  double diag = 0;                 // target bbox diagonal
+};
+
+/// Smooth non-rigid deformation: rotation about the centre by angles that vary along the
+/// principal axis (bend about a perpendicular axis + twist about the principal axis), then
+/// uniform scale and translation.
+Eigen::MatrixX3d bend_twist_scale(const Eigen::MatrixX3d& V, const ScenarioOptions& o);
+
+Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o);
+
+struct ScenarioErrors {
+  double hausdorff_clean_rel;      // max distance of noise-free inlier samples to the fit / diag
+  double hausdorff_noisy_rel;      // same with the noisy inlier points
+  double hole_mean_rel;            // mean |fit - truth| over hole vertices / diag
+  double all_mean_rel;             // mean |fit - truth| over all vertices / diag
+};
+
+/// Errors of a fitted mesh with the template's connectivity.
+ScenarioErrors evaluate(const Scenario& s, const TriMesh& fit);
+
+}  // namespace tbsp::test
