@@ -55,6 +55,7 @@ struct LaplacianDeformer::Cache {
   Eigen::SparseMatrix<double> NL;      // L_freeᵀ L_free, cached while the free set is unchanged
   std::vector<int> nl_free_index;      // free set NL was built for (empty = invalid)
   std::vector<ScalarRow> rows;  // coupled: every scalar row; uncoupled: one row per position constraint
+  double anchor = 0;            // ε of the anchor term
   SparseCholesky solver;
   // components
   Eigen::VectorXi component;
@@ -263,6 +264,12 @@ void LaplacianDeformer::setRotations(const std::vector<Eigen::Matrix3d>& R) {
   if (!R.empty()) use_rotation_field_ = false;
 }
 
+void LaplacianDeformer::setAnchor(double epsilon) {
+  if (!(std::isfinite(epsilon) && epsilon >= 0))
+    throw InvalidInput("[tbsp::LaplacianDeformer::setAnchor] epsilon must be >= 0 and finite");
+  if (epsilon != anchor_) { anchor_ = epsilon; cache_->matrix_valid = false; }
+}
+
 void LaplacianDeformer::setScale(double lambda) {
   if (!(std::isfinite(lambda) && lambda > 0))
     throw InvalidInput("[tbsp::LaplacianDeformer::setScale] scale must be > 0 and finite (got " + std::to_string(lambda) + ")");
@@ -391,6 +398,11 @@ void LaplacianDeformer::buildSystem() {
   Eigen::SparseMatrix<double> N(dims * nf, dims * nf);
   N.setFromTriplets(t.begin(), t.end());
   if (!c.coupled) N += NL;
+  // optional anchor ε‖x − V_rest‖² (setAnchor): keeps the factorization positive definite when
+  // a folded or degenerate mesh gives the Laplacian extra (near-)null vectors
+  c.anchor = nf > 0 ? anchor_ * N.diagonal().cwiseAbs().mean() : 0.0;
+  if (c.anchor > 0)
+    for (Eigen::Index i = 0; i < dims * nf; ++i) N.coeffRef(i, i) += c.anchor;
   report_progress(progress_, 0.3, "factorize");
   const auto t0 = Clock::now();
   if (nf > 0) c.solver.compute(N);
@@ -509,6 +521,8 @@ Eigen::MatrixX3d LaplacianDeformer::deform() {
     const Eigen::MatrixX3d rL = c.L_free.transpose() * bL;  // nf by 3
     if (!c.coupled) {
       Eigen::MatrixXd rhs = rL;
+      for (Eigen::Index i = 0; i < n; ++i)
+        if (c.free_index[std::size_t(i)] >= 0) rhs.row(c.free_index[std::size_t(i)]) += c.anchor * mesh_.V.row(i);
       for (const auto& r : c.rows) {
         const auto& con = constraints_[std::size_t(r.cid)];
         Eigen::RowVector3d q = con.target.transpose();
@@ -526,6 +540,9 @@ Eigen::MatrixX3d LaplacianDeformer::deform() {
     } else {
       Eigen::VectorXd rhs(3 * nf);
       for (int dd = 0; dd < 3; ++dd) rhs.segment(dd * nf, nf) = rL.col(dd);
+      for (Eigen::Index i = 0; i < n; ++i)
+        if (c.free_index[std::size_t(i)] >= 0)
+          for (int dd = 0; dd < 3; ++dd) rhs(dd * nf + c.free_index[std::size_t(i)]) += c.anchor * mesh_.V(i, dd);
       for (const auto& r : c.rows) {
         const auto& con = constraints_[std::size_t(r.cid)];
         double q = r.m.dot(con.target);

@@ -83,7 +83,8 @@ bool FitParameters::isValid(std::string* why) const {
 
 FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                        const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
-                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress) {
+                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
+                       bool orient_normals) {
   const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
   const auto t_all = Clock::now();
   FitReport rep;
@@ -137,7 +138,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   rep.point_spacing = median_spacing(search);
   rep.t_search = since(t0);
   t0 = Clock::now();
-  bool orient = false;
+  bool orient = orient_normals;
   if (N_in.rows() == 0) {
     N = pca_normals(search, params.normal_neighbours);
     rep.normals_estimated = orient = true;
@@ -356,6 +357,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       cur.F = F;
       D.setMesh(cur);  // §5.5.1: the Laplacian system of the current shape
       D.setScale(1.0);
+      D.setAnchor(1e-9);  // folded intermediate shapes must not make the system singular
       w_data = u.updating_match_weight;
     }
     if (u.refine_rotations && !u.laplacian_updating && it >= 2) {

@@ -110,7 +110,34 @@ Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::Ma
       scale(i) = deg > 0 ? 1.0 / deg : 0.0;
     }
   }
-  return scale.asDiagonal() * K;
+  Eigen::SparseMatrix<double> L = scale.asDiagonal() * K;
+  if (weights == LaplacianWeights::Cotangent) {
+    // rows without any usable weight (a vertex whose incident triangles are all degenerate)
+    // would leave the vertex unconstrained: use the uniform row there
+    const Eigen::SparseMatrix<double> U = uniform_graph_laplacian(F, n);
+    const Eigen::VectorXd deg = -Eigen::VectorXd(U.diagonal());
+    Eigen::VectorXd row_abs = Eigen::VectorXd::Zero(n);
+    for (int c = 0; c < K.outerSize(); ++c)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(K, c); it; ++it)
+        if (it.row() != it.col()) row_abs(it.row()) += std::abs(it.value());
+    const double mean_abs = n ? row_abs.sum() / double(n) : 0;
+    std::vector<Eigen::Triplet<double>> t;
+    bool any = false;
+    for (int c = 0; c < L.outerSize(); ++c)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(L, c); it; ++it)
+        if (!(row_abs(it.row()) <= 1e-9 * mean_abs && deg(it.row()) > 0)) t.emplace_back(int(it.row()), int(it.col()), it.value());
+    for (int c = 0; c < U.outerSize(); ++c)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(U, c); it; ++it)
+        if (row_abs(it.row()) <= 1e-9 * mean_abs && deg(it.row()) > 0) {
+          t.emplace_back(int(it.row()), int(it.col()), it.value() / deg(it.row()));
+          any = true;
+        }
+    if (any) {
+      L.setZero();
+      L.setFromTriplets(t.begin(), t.end());
+    }
+  }
+  return L;
 }
 
 }  // namespace tbsp

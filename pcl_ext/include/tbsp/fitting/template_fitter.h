@@ -32,6 +32,8 @@ namespace tbsp {
 /// \brief A user correspondence: template vertex ↔ cloud point (cloud_index >= 0) or a free 3D
 /// position (cloud_index < 0; for markers placed where the scan has no data).
 struct FitMarker {
+  FitMarker() = default;
+  FitMarker(int vertex, Eigen::Index cloud_point) : template_vertex(vertex), cloud_index(cloud_point) {}
   int template_vertex = -1;
   Eigen::Index cloud_index = -1;
   Eigen::Vector3d position = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
@@ -85,7 +87,7 @@ struct FitParameters {
   double updating_match_weight = 0.5;   ///< data weight with Laplacian updating
   bool remeshing = false;               ///< §5.5.2 (needs laplacian_updating; changes connectivity)
   double subdivision_error = 0;         ///< ε; 0: 0.15 % d
-  int max_vertices = 200000;            ///< remeshing stops growing the mesh beyond this
+  int max_vertices = 60000;             ///< remeshing stops growing the mesh beyond this
   bool fairing = false;                 ///< §5.5.3
   double fairing_lambda = 0.5;          ///< λ of eq. 5.2
   int fairing_steps = 2;                ///< per iteration
@@ -128,7 +130,8 @@ struct FitReport {
 };
 
 /// \brief Fits `templ` to the cloud P (#P by 3) with normals N (#P by 3, or 0 rows: then they
-/// are estimated by PCA over `normal_neighbours` and oriented by the deformed template).
+/// are estimated by PCA over `normal_neighbours`). Estimated normals (and given ones when
+/// `orient_normals` is true, e.g. from PCL's estimator) are oriented by the posed template.
 /// Non-finite points are skipped and counted.
 /// \param[out] result fitted mesh (template connectivity unless remeshing)
 /// \param[out] status per result vertex
@@ -136,7 +139,8 @@ struct FitReport {
 /// leave the system singular, invalid parameters or an unsuitable template; Cancelled.
 FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N,
                        const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
-                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress = {});
+                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress = {},
+                       bool orient_normals = false);
 
 /// Quadratic B-spline fall-off of §5.3: 1 at t=0, 0 at t>=1, C1 (t = distance / r_max).
 inline double bspline_weight(double t) {

@@ -8,8 +8,9 @@
 /// curvature) and n_i the outward normal: on a sphere of radius r, δ_i ≈ −(2/r) n_i.
 ///
 /// Robustness: cotangents are computed as cos/sin with sin floored at 1e-12 · |a||b| and
-/// clamped to ±kMaxCotangent, and mixed Voronoi areas are floored at 1e-8 × the mean vertex
-/// area, so obtuse, needle and zero-area triangles never produce Inf/NaN.
+/// clamped to ±kMaxCotangent, mixed Voronoi areas are floored at 1e-8 × the mean vertex area,
+/// and a row without any usable weight (all incident triangles degenerate) falls back to the
+/// uniform row, so obtuse, needle and zero-area triangles never produce Inf/NaN or empty rows.
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>

@@ -66,7 +66,8 @@ FitReport TemplateFitting<PointT>::reconstruct(TriMesh& output) {
   }
   TriMesh result;
   std::vector<VertexStatus> status;
-  FitReport r = fit_template(template_, P, N, markers_, roi, params_, result, status, progress_);
+  FitReport r = fit_template(template_, P, N, markers_, roi, params_, result, status, progress_,
+                             /*orient_normals=*/!pcl::traits::has_normal_v<PointT>);
   if constexpr (!pcl::traits::has_normal_v<PointT>) r.normals_estimated = true;
   output = std::move(result);
   status_ = std::move(status);
