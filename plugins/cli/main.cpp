@@ -18,6 +18,9 @@
 #include "tbsp/mesh/primitives.h"
 #include "tbsp/plugins/constraints_json.h"
 #include "tbsp/plugins/deform_report.h"
+#include "tbsp/plugins/fit_json.h"
+#include "tbsp/fitting/template_fitting.h"
+#include "tbsp/mesh/point_search.h"
 #include "tbsp/plugins/preview_render.h"
 
 namespace fs = std::filesystem;
@@ -67,6 +70,87 @@ int cmd_deform(const DeformArgs& a) {
               << (rep.rotation_field ? " (rotation field, " + std::to_string(rep.rotation_nodes) + " nodes)" : "")
               << ": factorize " << rep.t_factorize * 1e3 << " ms, solve " << rep.t_solve * 1e3
               << " ms, max residual " << rep.max_residual << " -> " << a.out << "\n";
+  return 0;
+}
+
+struct FitArgs {
+  std::string templ, cloud, markers, out, status, report, roi, png;
+  tbsp::FitParameters p;
+  bool no_prop = false, no_scale = false, no_field = false, quiet = false;
+};
+
+int cmd_fit(FitArgs a) {
+  const tbsp::TriMesh templ = tbsp::read_mesh(a.templ);
+  bool has_normals = false;
+  const auto cloud = tbsp::read_cloud_normals(a.cloud, &has_normals);
+  if (cloud->empty()) throw tbsp::InvalidInput(a.cloud + ": the cloud is empty");
+  const std::vector<tbsp::FitMarker> markers = tbsp::load_markers_json(a.markers);
+  tbsp::RegionOfInterest roi;
+  if (!a.roi.empty()) roi = tbsp::load_roi_json(a.roi);
+  a.p.propagate_displacements = !a.no_prop;
+  a.p.estimate_scale = !a.no_scale;
+  a.p.rotation_field = !a.no_field;
+  tbsp::cli::ProgressBar bar(!a.quiet);
+  tbsp::TriMesh out;
+  tbsp::FitReport rep;
+  std::vector<tbsp::VertexStatus> status;
+  auto run = [&](auto& fit) {
+    fit.setInputTemplate(templ);
+    fit.setMarkers(markers);
+    fit.setParameters(a.p);
+    fit.setRegionOfInterest(roi);
+    fit.setProgressCallback(bar.callback());
+    rep = fit.reconstruct(out);
+    status = fit.getVertexStatus();
+  };
+  if (has_normals) {
+    tbsp::TemplateFitting<pcl::PointNormal> fit;
+    fit.setInputCloud(cloud);
+    run(fit);
+  } else {
+    pcl::PointCloud<pcl::PointXYZ>::Ptr xyz(new pcl::PointCloud<pcl::PointXYZ>);
+    for (const auto& q : *cloud) xyz->push_back(pcl::PointXYZ(q.x, q.y, q.z));
+    tbsp::TemplateFitting<pcl::PointXYZ> fit;
+    fit.setInputCloud(xyz);
+    run(fit);
+  }
+  bar.finish();
+  tbsp::write_mesh(a.out, out);
+  if (!a.status.empty()) {
+    std::string text = "# per output vertex: matched | propagated | masked | unmatched\n";
+    for (auto st : status) text += std::string(tbsp::to_string(st)) + "\n";
+    tbsp::write_text_file_atomic(a.status, text);
+  }
+  nlohmann::json j = tbsp::fit_report_json(rep);
+  j["input"] = {{"template", a.templ}, {"cloud", a.cloud}, {"markers", a.markers}, {"roi", a.roi}};
+  j["output"] = a.out;
+  if (!a.report.empty()) tbsp::write_text_file_atomic(a.report, j.dump(2) + "\n");
+  if (!a.png.empty()) {
+    Eigen::MatrixX3d P(Eigen::Index(cloud->size()), 3);
+    Eigen::Index n = 0;
+    for (const auto& q : *cloud)
+      if (std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z)) P.row(n++) << q.x, q.y, q.z;
+    P.conservativeResize(n, 3);
+    const tbsp::PointSearch tree(P);
+    Eigen::VectorXd d(out.V.rows());
+    for (Eigen::Index v = 0; v < out.V.rows(); ++v) {
+      double d2 = 0;
+      tree.nearest(out.V.row(v).transpose(), &d2);
+      d(v) = std::sqrt(d2);
+    }
+    tbsp::TriMesh colored = out, st = out;
+    colored.C = tbsp::colormap(d, 0, 0.01 * rep.bbox_diagonal);
+    Eigen::VectorXd sv(out.V.rows());
+    for (Eigen::Index v = 0; v < sv.rows(); ++v) sv(v) = status[std::size_t(v)] == tbsp::VertexStatus::Matched ? 0.0 : status[std::size_t(v)] == tbsp::VertexStatus::Propagated ? 0.5 : 1.0;
+    st.C = tbsp::colormap(sv, 0, 1);
+    tbsp::render_panels_png(a.png, {{templ, "template"}, {colored, "fit: distance to scan 0..1% diag"},
+                                    {st, "blue matched, green propagated, red masked"}});
+  }
+  if (!a.quiet)
+    std::cout << "fitted " << out.V.rows() << " vertices to " << cloud->size() << " points: " << rep.iterations
+              << " iterations, scale " << rep.scale << ", Hausdorff " << 100 * rep.hausdorff_rel << "% of the bbox diagonal (rms "
+              << 100 * rep.rms / rep.bbox_diagonal << "%), " << rep.t_total << " s -> " << a.out << "\n"
+              << (rep.message.empty() ? "" : "  note: " + rep.message + "\n");
   return 0;
 }
 
@@ -162,6 +246,29 @@ int main(int argc, char** argv) {
   deform->add_option("--report", da.report, "JSON report: timings, counts, residuals");
   deform->add_flag("-q,--quiet", da.quiet, "no progress bar or summary");
 
+  FitArgs fa;
+  auto* fitc = app.add_subcommand("fit", "fit a template mesh to a point cloud (thesis ch. 5)");
+  fitc->add_option("--template", fa.templ, "template mesh (.ply .obj .off .vtk)")->required()->check(CLI::ExistingFile);
+  fitc->add_option("--cloud", fa.cloud, "scan (.pcd, or .ply/.obj/.off/.vtk vertices); normals used if present")->required()->check(CLI::ExistingFile);
+  fitc->add_option("--markers", fa.markers, "markers JSON (docs/fit_json.md)")->required()->check(CLI::ExistingFile);
+  fitc->add_option("--out", fa.out, "fitted mesh, written atomically")->required();
+  fitc->add_option("--status", fa.status, "per-vertex status text file");
+  fitc->add_option("--report", fa.report, "JSON report (iterations, timings, Hausdorff, RMS, coverage)");
+  fitc->add_option("--roi", fa.roi, "region-of-interest JSON (exclusions)");
+  fitc->add_option("--png", fa.png, "PNG: template, fit coloured by distance to the scan, status");
+  fitc->add_option("--r-max", fa.p.max_match_distance, "final match radius r_max (0 = from the data)");
+  fitc->add_option("--theta-max", fa.p.max_normal_angle_deg, "max normal deviation θ_max in degrees");
+  fitc->add_option("--iterations", fa.p.max_iterations, "max iterations");
+  fitc->add_option("--match-weight", fa.p.match_weight, "weight of data constraints");
+  fitc->add_flag("--laplacian-updating", fa.p.laplacian_updating, "§5.5.1: rebuild the Laplacian each iteration");
+  fitc->add_flag("--remesh", fa.p.remeshing, "§5.5.2: adaptive subdivision (changes connectivity)");
+  fitc->add_flag("--fairing", fa.p.fairing, "§5.5.3: tangential fairing against fold-overs");
+  fitc->add_flag("--refine-rotations", fa.p.refine_rotations, "re-estimate the rotation field from the fit");
+  fitc->add_flag("--no-propagation", fa.no_prop, "skip the displacement propagation of §5.3");
+  fitc->add_flag("--no-scale", fa.no_scale, "skip the global scale of §5.2");
+  fitc->add_flag("--no-rotation-field", fa.no_field, "skip the rotation field of §3.2.3");
+  fitc->add_flag("-q,--quiet", fa.quiet, "no progress bar or summary");
+
   std::string v_mesh, v_json;
   bool v_strict = false;
   auto* validate = app.add_subcommand("validate", "report mesh problems (non-manifold, degenerate, NaN, ...)");
@@ -206,6 +313,7 @@ int main(int argc, char** argv) {
   const std::string sub = app.get_subcommands().front()->get_name();
   try {
     if (*deform) return cmd_deform(da);
+    if (*fitc) return cmd_fit(fa);
     if (*validate) return cmd_validate(v_mesh, v_json, v_strict);
     if (*convert) {
       tbsp::MeshWriteOptions o;

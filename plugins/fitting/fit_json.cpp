@@ -1,0 +1,166 @@
+#include "tbsp/plugins/fit_json.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+
+#include "tbsp/core/error.h"
+
+namespace tbsp {
+
+namespace {
+nlohmann::json load(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw FileError("'" + path + "': cannot open; check the path");
+  nlohmann::json doc;
+  try {
+    in >> doc;
+  } catch (const nlohmann::json::parse_error& e) {
+    throw FileError(path + ": not valid JSON (" + e.what() + ")");
+  }
+  if (!doc.is_object()) throw FileError(path + ": expected a JSON object");
+  return doc;
+}
+[[noreturn]] void fail(const std::string& path, const std::string& where, const std::string& msg) {
+  throw FileError(path + ": " + where + ": " + msg);
+}
+Eigen::Vector3d vec3(const nlohmann::json& j, const std::string& path, const std::string& where) {
+  if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() || !j[2].is_number())
+    fail(path, where, "expected an array of 3 numbers");
+  Eigen::Vector3d v(j[0].get<double>(), j[1].get<double>(), j[2].get<double>());
+  if (!v.allFinite()) fail(path, where, "values must be finite");
+  return v;
+}
+long long integer(const nlohmann::json& j, const std::string& path, const std::string& where) {
+  if (!j.is_number_integer()) fail(path, where, "expected an integer");
+  return j.get<long long>();
+}
+}  // namespace
+
+std::vector<FitMarker> load_markers_json(const std::string& path) {
+  const nlohmann::json doc = load(path);
+  if (!doc.contains("markers") || !doc["markers"].is_array()) fail(path, "markers", "missing: expected an array");
+  std::vector<FitMarker> out;
+  const auto& a = doc["markers"];
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const std::string w = "markers[" + std::to_string(i) + "]";
+    const auto& j = a[i];
+    if (!j.is_object()) fail(path, w, "expected an object");
+    for (auto it = j.begin(); it != j.end(); ++it)
+      if (it.key() != "template_vertex" && it.key() != "cloud_index" && it.key() != "position" && it.key() != "weight" &&
+          it.key() != "rotation" && it.key() != "comment")
+        fail(path, w + "." + it.key(), "unknown key (template_vertex, cloud_index, position, weight, rotation)");
+    FitMarker m;
+    if (!j.contains("template_vertex")) fail(path, w, "needs \"template_vertex\"");
+    m.template_vertex = int(integer(j["template_vertex"], path, w + ".template_vertex"));
+    if (j.contains("cloud_index") == j.contains("position"))
+      fail(path, w, "give exactly one of \"cloud_index\" (a point of the cloud) or \"position\" (a free marker)");
+    if (j.contains("cloud_index")) m.cloud_index = integer(j["cloud_index"], path, w + ".cloud_index");
+    else m.position = vec3(j["position"], path, w + ".position");
+    if (j.contains("weight")) {
+      if (!j["weight"].is_number() || !(j["weight"].get<double>() > 0)) fail(path, w + ".weight", "must be a number > 0");
+      m.weight = j["weight"].get<double>();
+    }
+    if (j.contains("rotation")) {
+      const auto& r = j["rotation"];
+      if (!r.is_object() || !r.contains("axis") || !r.contains("angle_deg") || !r["angle_deg"].is_number())
+        fail(path, w + ".rotation", "expected {\"axis\": [x,y,z], \"angle_deg\": a}");
+      const Eigen::Vector3d ax = vec3(r["axis"], path, w + ".rotation.axis");
+      if (ax.norm() < 1e-12) fail(path, w + ".rotation.axis", "must be non-zero");
+      m.rotation = Eigen::AngleAxisd(r["angle_deg"].get<double>() * M_PI / 180, ax.normalized()).toRotationMatrix();
+    }
+    out.push_back(m);
+  }
+  return out;
+}
+
+RegionOfInterest load_roi_json(const std::string& path) {
+  const nlohmann::json doc = load(path);
+  RegionOfInterest roi;
+  auto spheres = [&](const char* key, std::vector<Sphere>& out) {
+    if (!doc.contains(key)) return;
+    if (!doc[key].is_array()) fail(path, key, "expected an array");
+    for (std::size_t i = 0; i < doc[key].size(); ++i) {
+      const std::string w = std::string(key) + "[" + std::to_string(i) + "]";
+      const auto& j = doc[key][i];
+      if (!j.is_object() || !j.contains("center") || !j.contains("radius") || !j["radius"].is_number())
+        fail(path, w, "expected {\"center\": [x,y,z], \"radius\": r}");
+      out.push_back({vec3(j["center"], path, w + ".center"), j["radius"].get<double>()});
+    }
+  };
+  auto boxes = [&](const char* key, std::vector<Box>& out) {
+    if (!doc.contains(key)) return;
+    if (!doc[key].is_array()) fail(path, key, "expected an array");
+    for (std::size_t i = 0; i < doc[key].size(); ++i) {
+      const std::string w = std::string(key) + "[" + std::to_string(i) + "]";
+      const auto& j = doc[key][i];
+      if (!j.is_object() || !j.contains("min") || !j.contains("max")) fail(path, w, "expected {\"min\": [..], \"max\": [..]}");
+      out.push_back({vec3(j["min"], path, w + ".min"), vec3(j["max"], path, w + ".max")});
+    }
+  };
+  for (auto it = doc.begin(); it != doc.end(); ++it) {
+    static const char* known[] = {"exclude_template_vertices", "exclude_template_spheres", "exclude_template_boxes",
+                                  "exclude_cloud_points", "exclude_cloud_spheres", "exclude_cloud_boxes", "comment"};
+    if (std::find(std::begin(known), std::end(known), it.key()) == std::end(known)) fail(path, it.key(), "unknown key");
+  }
+  if (doc.contains("exclude_template_vertices")) {
+    if (!doc["exclude_template_vertices"].is_array()) fail(path, "exclude_template_vertices", "expected an array");
+    for (const auto& v : doc["exclude_template_vertices"]) roi.exclude_template_vertices.push_back(int(integer(v, path, "exclude_template_vertices")));
+  }
+  if (doc.contains("exclude_cloud_points")) {
+    if (!doc["exclude_cloud_points"].is_array()) fail(path, "exclude_cloud_points", "expected an array");
+    for (const auto& v : doc["exclude_cloud_points"]) roi.exclude_cloud_points.push_back(integer(v, path, "exclude_cloud_points"));
+  }
+  spheres("exclude_template_spheres", roi.exclude_template_spheres);
+  spheres("exclude_cloud_spheres", roi.exclude_cloud_spheres);
+  boxes("exclude_template_boxes", roi.exclude_template_boxes);
+  boxes("exclude_cloud_boxes", roi.exclude_cloud_boxes);
+  return roi;
+}
+
+const char* to_string(VertexStatus s) {
+  switch (s) {
+    case VertexStatus::Matched: return "matched";
+    case VertexStatus::Propagated: return "propagated";
+    case VertexStatus::Masked: return "masked";
+    default: return "unmatched";
+  }
+}
+
+nlohmann::json fit_report_json(const FitReport& r) {
+  nlohmann::json j;
+  j["status"] = r.status == FitReport::Status::Success ? "success" : "not_converged";
+  j["message"] = r.message;
+  j["iterations"] = r.iterations;
+  nlohmann::json h = nlohmann::json::array();
+  for (const auto& it : r.history)
+    h.push_back({{"iteration", it.iteration}, {"match_radius", it.match_radius}, {"matched", it.matched},
+                 {"max_move_p99", it.max_move}, {"seconds", it.seconds}});
+  j["history"] = h;
+  j["scale"] = r.scale;
+  const auto& u = r.used;
+  j["parameters"] = {{"max_match_distance", u.max_match_distance}, {"initial_match_distance", u.initial_match_distance},
+                     {"max_normal_angle_deg", u.max_normal_angle_deg}, {"max_iterations", u.max_iterations},
+                     {"tolerance", u.tolerance}, {"marker_weight", u.marker_weight}, {"match_weight", u.match_weight},
+                     {"propagation_weight", u.propagation_weight}, {"rim_rejection", u.rim_rejection},
+                     {"plane_fit", u.plane_fit}, {"rotation_field", u.rotation_field}, {"estimate_scale", u.estimate_scale},
+                     {"propagate_displacements", u.propagate_displacements}, {"refine_rotations", u.refine_rotations},
+                     {"laplacian_updating", u.laplacian_updating}, {"remeshing", u.remeshing},
+                     {"subdivision_error", u.subdivision_error}, {"fairing", u.fairing}};
+  j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
+                 {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},
+                 {"vertices", r.vertices}, {"faces", r.faces}, {"matched", r.matched}, {"propagated", r.propagated},
+                 {"masked", r.masked}};
+  j["metrics"] = {{"bbox_diagonal", r.bbox_diagonal}, {"point_spacing", r.point_spacing},
+                  {"hausdorff", r.hausdorff}, {"hausdorff_relative", r.hausdorff_rel}, {"rms", r.rms},
+                  {"mean", r.mean}, {"p99", r.p99}, {"coverage_vertices", r.coverage_vertices},
+                  {"coverage_points", r.coverage_points}, {"flipped_faces", r.flipped_faces}};
+  j["timings_s"] = {{"normals", r.t_normals},     {"search_structure", r.t_search}, {"initial_deformation", r.t_initial},
+                    {"global_scale", r.t_scale},  {"iterations", r.t_iterations},   {"matching", r.t_matching},
+                    {"solve", r.t_solve},         {"propagation", r.t_propagation}, {"remeshing", r.t_remeshing},
+                    {"fairing", r.t_fairing},     {"metrics", r.t_metrics},         {"total", r.t_total}};
+  return j;
+}
+
+}  // namespace tbsp
