@@ -1,0 +1,82 @@
+// `tbsp fit` end to end on a ground-truth scenario built from a real mesh.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <pcl/conversions.h>
+
+#include "support/gt_scenario.h"
+#include "test_util.h"
+#include "tbsp/io/cloud_io.h"
+#include "tbsp/io/mesh_io.h"
+
+using namespace tbsp;
+
+namespace {
+int run(const std::string& args, const std::filesystem::path& dir, std::string* err = nullptr) {
+  const std::string errf = (dir / "stderr.txt").string();
+  const int rc = std::system((std::string(TBSP_CLI) + " " + args + " >/dev/null 2>" + errf).c_str());
+  if (err) {
+    std::ifstream in(errf);
+    err->assign(std::istreambuf_iterator<char>(in), {});
+  }
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+}  // namespace
+
+TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
+  const std::string tpath = test::shared("meshes/libigl__libigl-tutorial-data/bunny.off");
+  TBSP_REQUIRE_FILE(tpath);
+  const auto dir = test::temp_dir("cli_fit");
+  test::ScenarioOptions o;
+  o.points = 15000;
+  const test::Scenario s = test::make_scenario(read_mesh(tpath), o);
+  pcl::PointCloud<pcl::PointNormal> c;
+  for (Eigen::Index i = 0; i < s.P.rows(); ++i) {
+    pcl::PointNormal p;
+    p.x = float(s.P(i, 0)); p.y = float(s.P(i, 1)); p.z = float(s.P(i, 2));
+    p.normal_x = float(s.N(i, 0)); p.normal_y = float(s.N(i, 1)); p.normal_z = float(s.N(i, 2));
+    c.push_back(p);
+  }
+  pcl::PCLPointCloud2 blob;
+  pcl::toPCLPointCloud2(c, blob);
+  const std::string cloud = (dir / "scan.pcd").string();
+  write_cloud(cloud, blob);
+  nlohmann::json mk;
+  for (const auto& m : s.markers) mk["markers"].push_back({{"template_vertex", m.template_vertex}, {"cloud_index", m.cloud_index}});
+  std::ofstream(dir / "markers.json") << mk.dump();
+  const std::string out = (dir / "fit.ply").string(), rep = (dir / "r.json").string(), st = (dir / "status.txt").string(),
+                    png = (dir / "fit.png").string();
+  std::string err;
+  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+                    " --out " + out + " --report " + rep + " --status " + st + " --png " + png,
+                dir, &err),
+            0)
+      << err;
+  EXPECT_EQ(read_mesh(out).F, s.templ.F);
+  nlohmann::json j;
+  std::ifstream(rep) >> j;
+  EXPECT_NEAR(j["scale"].get<double>(), 2.0, 0.1);
+  EXPECT_GT(j["metrics"]["coverage_vertices"].get<double>(), 0.5);
+  EXPECT_GT(j["timings_s"]["total"].get<double>(), 0.0);
+  std::ifstream sf(st);
+  std::string line;
+  int lines = 0;
+  while (std::getline(sf, line)) lines += line.empty() || line[0] == '#' ? 0 : 1;
+  EXPECT_EQ(lines, s.templ.V.rows());
+  EXPECT_GT(std::filesystem::file_size(png), 1000u);
+  // bad input: a marker on a missing template vertex -> exit 2, message names it, output kept
+  const auto before = std::filesystem::last_write_time(out);
+  std::ofstream(dir / "bad.json") << R"({"markers": [{"template_vertex": 999999, "cloud_index": 0}]})";
+  EXPECT_EQ(run("fit --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "bad.json").string() + " --out " + out, dir, &err), 2);
+  EXPECT_NE(err.find("template vertex 999999 does not exist"), std::string::npos) << err;
+  std::ofstream(dir / "bad.json") << R"({"markers": [{"template_vertex": 3, "cloud_index": 1, "position": [0,0,0]}]})";
+  EXPECT_EQ(run("fit --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "bad.json").string() + " --out " + out, dir, &err), 2);
+  EXPECT_NE(err.find("markers[0]"), std::string::npos) << err;
+  EXPECT_EQ(std::filesystem::last_write_time(out), before);
+  if (!std::getenv("TBSP_KEEP_TEST_OUTPUT")) std::filesystem::remove_all(dir);
+  else std::printf("outputs kept in %s\n", dir.c_str());
+}
