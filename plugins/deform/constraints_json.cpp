@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "tbsp/core/error.h"
+#include "tbsp/plugins/json_file.h"
 
 namespace tbsp {
 
@@ -188,15 +189,7 @@ DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh,
 }
 
 DeformJob load_constraints_json(const std::string& path, const TriMesh& mesh) {
-  std::ifstream in(path);
-  if (!in) throw FileError("'" + path + "': cannot open the constraints file; check the path");
-  nlohmann::json doc;
-  try {
-    in >> doc;
-  } catch (const nlohmann::json::parse_error& e) {
-    throw FileError(path + ": not valid JSON (" + e.what() + ")");
-  }
-  return parse_constraints_json(doc, mesh, path);
+  return parse_constraints_json(load_json_file(path), mesh, path);
 }
 
 }  // namespace tbsp

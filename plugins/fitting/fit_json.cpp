@@ -6,19 +6,13 @@
 #include <fstream>
 
 #include "tbsp/core/error.h"
+#include "tbsp/plugins/json_file.h"
 
 namespace tbsp {
 
 namespace {
 nlohmann::json load(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw FileError("'" + path + "': cannot open; check the path");
-  nlohmann::json doc;
-  try {
-    in >> doc;
-  } catch (const nlohmann::json::parse_error& e) {
-    throw FileError(path + ": not valid JSON (" + e.what() + ")");
-  }
+  nlohmann::json doc = load_json_file(path);
   if (!doc.is_object()) throw FileError(path + ": expected a JSON object");
   return doc;
 }
