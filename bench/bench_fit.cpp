@@ -12,7 +12,7 @@
 #include <cstring>
 #include <filesystem>
 
-#include "support/gt_scenario.h"
+#include "tbsp/plugins/synthetic_scan.h"
 #include "tbsp/fitting/template_fitter.h"
 #include "tbsp/io/cloud_io.h"
 #include "tbsp/io/mesh_io.h"
@@ -29,7 +29,7 @@ void row(const char* model, std::size_t markers, Eigen::Index verts, Eigen::Inde
               100 * r.hausdorff_rel, 100 * r.p99 / r.bbox_diagonal, r.iterations, r.t_total, extra);
 }
 
-double hole_error(const test::Scenario& s, const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
+double hole_error(const synth::Scenario& s, const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
   // mean distance from the true surface inside the hole (hole vertices of the target) to a mesh
   const MeshDistance md(V, F);
   double sum = 0;
@@ -83,13 +83,13 @@ int main(int argc, char** argv) {
   for (const Case& c : {Case{"bunny GT: bend+twist+x2, hole 25%", "/meshes/libigl__libigl-tutorial-data/bunny.off", 30000},
                         Case{"armadillo GT: bend+twist+x2, hole 25%", "/meshes/libigl__libigl-tutorial-data/armadillo.obj", 100000}}) {
     const TriMesh t = read_mesh(kData + c.path);
-    test::ScenarioOptions o;
+    synth::ScenarioOptions o;
     o.points = c.points;
-    const test::Scenario s = test::make_scenario(t, o);
+    const synth::Scenario s = synth::make_scenario(t, o);
     TriMesh fit;
     std::vector<VertexStatus> st;
     const FitReport r = fit_template(s.templ, s.P, s.N, s.markers, {}, {}, fit, st);
-    const test::ScenarioErrors e = test::evaluate(s, fit);
+    const synth::ScenarioErrors e = synth::evaluate(s, fit);
     char note[256];
     std::snprintf(note, sizeof note, "clean Hausdorff %.3f%%; hole: surface %.3f%%; ROI incl. 10%% outliers", 100 * e.hausdorff_clean_rel,
                   100 * hole_error(s, fit.V, fit.F));

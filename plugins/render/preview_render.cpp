@@ -34,8 +34,14 @@ void render_panels_png(const std::string& path, const std::vector<RenderPanel>& 
   cv::Mat canvas(o.panel_height, o.panel_width * int(panels.size()), CV_8UC3, cv::Scalar(255, 255, 255));
   Eigen::Vector2d gmin(1e300, 1e300), gmax(-1e300, -1e300);
   std::vector<Eigen::MatrixX3d> P(panels.size());
+  std::vector<Eigen::MatrixX3d> Q(panels.size());
   for (std::size_t k = 0; k < panels.size(); ++k) {
     P[k] = (panels[k].mesh.V * R.transpose());
+    Q[k] = panels[k].points * R.transpose();
+    if (Q[k].rows()) {
+      gmin = gmin.cwiseMin(Q[k].leftCols<2>().colwise().minCoeff().transpose());
+      gmax = gmax.cwiseMax(Q[k].leftCols<2>().colwise().maxCoeff().transpose());
+    }
     if (P[k].rows() == 0) continue;
     gmin = gmin.cwiseMin(P[k].leftCols<2>().colwise().minCoeff().transpose());
     gmax = gmax.cwiseMax(P[k].leftCols<2>().colwise().maxCoeff().transpose());
@@ -77,6 +83,19 @@ void render_panels_png(const std::string& path, const std::vector<RenderPanel>& 
       const cv::Point pts[3] = {px(a), px(b), px(cc)};
       const cv::Scalar col(255 * shade * base.z(), 255 * shade * base.y(), 255 * shade * base.x());
       cv::fillConvexPoly(canvas, pts, 3, col, cv::LINE_AA, 4);
+    }
+    if (Q[k].rows()) {
+      std::vector<int> po(static_cast<std::size_t>(Q[k].rows()));
+      std::iota(po.begin(), po.end(), 0);
+      std::sort(po.begin(), po.end(), [&](int a, int b) { return Q[k](a, 2) < Q[k](b, 2); });
+      const double zlo = Q[k].col(2).minCoeff(), zhi = Q[k].col(2).maxCoeff();
+      const bool pc = panels[k].point_colors.rows() == Q[k].rows();
+      for (int i : po) {
+        const double shade = 0.35 + 0.65 * (zhi > zlo ? (Q[k](i, 2) - zlo) / (zhi - zlo) : 1.0);
+        Eigen::Vector3d base = pc ? Eigen::Vector3d(panels[k].point_colors.row(i).transpose()) : Eigen::Vector3d(0.2, 0.35, 0.8);
+        cv::circle(canvas, px(Q[k].row(i)), 16, cv::Scalar(255 * shade * base.z(), 255 * shade * base.y(), 255 * shade * base.x()),
+                   cv::FILLED, cv::LINE_AA, 4);
+      }
     }
     cv::putText(canvas, panels[k].title, cv::Point(ox + 8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
     if (k > 0) cv::line(canvas, cv::Point(ox, 0), cv::Point(ox, o.panel_height), cv::Scalar(180, 180, 180));

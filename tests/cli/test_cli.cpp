@@ -92,10 +92,15 @@ TEST(Cli, DemoProducesOutputs) {
   const auto dir = test::temp_dir("cli_demo");
   const CliResult r = run("demo -q --out " + (dir / "o").string(), dir);
   ASSERT_EQ(r.code, 0) << r.err;
-  for (const char* f : {"bent_rotation_field.ply", "bent_linear.ply", "demo.png", "report.json"})
+  for (const char* f : {"fitted.ply", "fit_report.json", "fit.png", "bent_rotation_field.ply", "bent_linear.ply", "demo.png",
+                        "report.json"})
     EXPECT_TRUE(std::filesystem::exists(dir / "o" / f)) << f;
   nlohmann::json j;
   std::ifstream(dir / "o" / "report.json") >> j;
   EXPECT_LT(j["mean_edge_strain"]["rotation_field"].get<double>(), j["mean_edge_strain"]["linear"].get<double>());
+  nlohmann::json f;
+  std::ifstream(dir / "o" / "fit_report.json") >> f;
+  EXPECT_NEAR(f["scale"].get<double>(), 1.5, 0.1);  // the sample scan is the bar scaled ×1.5
+  EXPECT_LT(f["metrics"]["p99"].get<double>() / f["metrics"]["bbox_diagonal"].get<double>(), 0.2);
   std::filesystem::remove_all(dir);
 }

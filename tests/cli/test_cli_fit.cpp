@@ -8,7 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <pcl/conversions.h>
 
-#include "support/gt_scenario.h"
+#include "tbsp/plugins/synthetic_scan.h"
 #include "test_util.h"
 #include "tbsp/io/cloud_io.h"
 #include "tbsp/io/mesh_io.h"
@@ -31,9 +31,9 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   const std::string tpath = test::shared("meshes/libigl__libigl-tutorial-data/bunny.off");
   TBSP_REQUIRE_FILE(tpath);
   const auto dir = test::temp_dir("cli_fit");
-  test::ScenarioOptions o;
+  synth::ScenarioOptions o;
   o.points = 15000;
-  const test::Scenario s = test::make_scenario(read_mesh(tpath), o);
+  const synth::Scenario s = synth::make_scenario(read_mesh(tpath), o);
   pcl::PointCloud<pcl::PointNormal> c;
   for (Eigen::Index i = 0; i < s.P.rows(); ++i) {
     pcl::PointNormal p;

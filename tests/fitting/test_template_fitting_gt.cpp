@@ -8,7 +8,7 @@
 #include <algorithm>
 #include <cstdio>
 
-#include "support/gt_scenario.h"
+#include "tbsp/plugins/synthetic_scan.h"
 #include "test_util.h"
 #include "tbsp/fitting/template_fitter.h"
 #include "tbsp/io/mesh_io.h"
@@ -22,17 +22,17 @@ const char* kBunny = "meshes/libigl__libigl-tutorial-data/bunny.off";
 
 struct Outcome {
   FitReport report;
-  test::ScenarioErrors err;
+  synth::ScenarioErrors err;
   double clean_p99 = 0, hole_surface_mean = 0;
   int flipped_vs_truth = 0;
 };
 
-Outcome run(const test::Scenario& s, const FitParameters& p = {}) {
+Outcome run(const synth::Scenario& s, const FitParameters& p = {}) {
   Outcome o;
   TriMesh fit;
   std::vector<VertexStatus> st;
   o.report = fit_template(s.templ, s.P, s.N, s.markers, {}, p, fit, st);
-  o.err = test::evaluate(s, fit);
+  o.err = synth::evaluate(s, fit);
   const MeshDistance fd(fit.V, fit.F);
   std::vector<double> d;
   for (std::size_t i = 0; i < s.inlier.size(); ++i)
@@ -60,7 +60,7 @@ Outcome run(const test::Scenario& s, const FitParameters& p = {}) {
 
 TEST(TemplateFittingGroundTruth, BendTwistScaleNoiseOutliersHole) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
-  const test::Scenario s = test::make_scenario(read_mesh(test::shared(kBunny)), {});
+  const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), {});
   ASSERT_GE(s.hole_area_fraction, 0.25);
   ASSERT_LE(s.markers.size(), 30u);
   const Outcome o = run(s);
@@ -75,7 +75,7 @@ TEST(TemplateFittingGroundTruth, BendTwistScaleNoiseOutliersHole) {
 TEST(TemplateFittingGroundTruth, WithoutGlobalScaleTheFitFails) {
   // control for §5.2: data ×2 out of scale is not reached by the iterations alone
   TBSP_REQUIRE_FILE(test::shared(kBunny));
-  const test::Scenario s = test::make_scenario(read_mesh(test::shared(kBunny)), {});
+  const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), {});
   FitParameters no_scale;
   no_scale.estimate_scale = false;
   const Outcome o = run(s, no_scale);
@@ -84,10 +84,10 @@ TEST(TemplateFittingGroundTruth, WithoutGlobalScaleTheFitFails) {
 
 TEST(TemplateFittingGroundTruth, BadlyRegisteredFragmentsGiveOneSurface) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
-  test::ScenarioOptions opt;
+  synth::ScenarioOptions opt;
   opt.fragment_offset = 0.01;  // one half of the cloud shifted by 1 % of the bbox diagonal
   opt.hole = 0.05;
-  const test::Scenario s = test::make_scenario(read_mesh(test::shared(kBunny)), opt);
+  const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
   const Outcome o = run(s);
   // a single sheet between the fragments: no fold-overs, every clean sample within ~offset
   EXPECT_EQ(o.flipped_vs_truth, 0);

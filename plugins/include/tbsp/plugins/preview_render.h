@@ -5,6 +5,7 @@
 /// studio-grade rasterizer with depth/id buffers is pcl_ext/multiview (see issue 6).
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tbsp/mesh/tri_mesh.h"
@@ -12,8 +13,12 @@
 namespace tbsp {
 
 struct RenderPanel {
+  RenderPanel() = default;
+  RenderPanel(TriMesh m, std::string t) : mesh(std::move(m)), title(std::move(t)) {}
   TriMesh mesh;                 ///< if mesh.C is set (#V by 3 in [0,1]) faces use those colours
   std::string title;
+  Eigen::MatrixX3d points;      ///< optional point cloud drawn as dots (e.g. the input scan)
+  Eigen::MatrixX3d point_colors;  ///< optional, one row per point in [0,1]
 };
 
 struct RenderOptions {

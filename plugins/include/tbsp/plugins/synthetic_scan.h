@@ -1,12 +1,16 @@
 #pragma once
-// Ground-truth fitting scenarios built from a real mesh (tests, benchmarks, docs table).
+/// \file synthetic_scan.h
+/// \brief Synthetic scans with ground truth from any mesh: a known smooth non-rigid deformation
+/// (bend + twist + scale), area-uniform samples with Gaussian noise, uniform outliers, a hole,
+/// optional misregistered fragments, and markers. Used by the tests, the benchmarks, the sample
+/// data (`tbsp synth-scan`) and the demo. Deterministic for a given seed.
 #include <Eigen/Core>
 #include <vector>
 
 #include "tbsp/fitting/template_fitter.h"
 #include "tbsp/mesh/tri_mesh.h"
 
-namespace tbsp::test {
+namespace tbsp::synth {
 
 struct ScenarioOptions {
   double bend_deg = 60, twist_deg = 60, scale = 2.0;
@@ -49,4 +53,4 @@ struct ScenarioErrors {
 /// Errors of a fitted mesh with the template's connectivity.
 ScenarioErrors evaluate(const Scenario& s, const TriMesh& fit);
 
-}  // namespace tbsp::test
+}  // namespace tbsp::synth

@@ -1,4 +1,4 @@
-#include "gt_scenario.h"
+#include "tbsp/plugins/synthetic_scan.h"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -9,7 +9,7 @@
 #include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/mesh/point_search.h"
 
-namespace tbsp::test {
+namespace tbsp::synth {
 
 namespace {
 struct Frame {
@@ -179,4 +179,4 @@ ScenarioErrors evaluate(const Scenario& s, const TriMesh& fit) {
   return e;
 }
 
-}  // namespace tbsp::test
+}  // namespace tbsp::synth
