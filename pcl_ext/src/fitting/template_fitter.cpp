@@ -242,8 +242,19 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       // λ = mean ratio of marker geodesics on the posed template to those on the rest template
       // (§5.2). Iterated to the self-consistent value: the re-solved shape with scale λ has
       // geodesic ratio λ (the thesis does one step; data far out of scale needs a few).
+      std::vector<int> dm(distinct.begin(), distinct.end());
+      const Eigen::MatrixXd D0 = geodesic_distance_matrix(templ.V, templ.F, dm);  // computed once
+      auto ratio_of = [&](const Eigen::MatrixX3d& X) {
+        const Eigen::MatrixXd D1 = geodesic_distance_matrix(X, templ.F, dm);
+        double sum = 0;
+        int cnt = 0;
+        for (Eigen::Index a = 0; a < D0.rows(); ++a)
+          for (Eigen::Index b = a + 1; b < D0.cols(); ++b)
+            if (std::isfinite(D0(a, b)) && std::isfinite(D1(a, b)) && D0(a, b) > 0) { sum += D1(a, b) / D0(a, b); ++cnt; }
+        return cnt ? sum / cnt : std::numeric_limits<double>::quiet_NaN();
+      };
       for (int k = 0; k < 8; ++k) {
-        const double ratio = global_scale_from_geodesics(templ.V, V, templ.F, mverts);
+        const double ratio = ratio_of(V);  // = global_scale_from_geodesics(templ.V, V, F, markers)
         if (!(ratio > 0 && std::isfinite(ratio))) break;
         const double change = std::abs(ratio / lambda - 1);
         lambda = ratio;
@@ -276,6 +287,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // ---- stage 2: iterative matching
   std::vector<char> matched(std::size_t(V.rows()), 0);
   Eigen::MatrixX3d target = V;
+  std::vector<int> frozen_ids;     // constraint id per vertex while the set is frozen (-1: none)
+  Eigen::MatrixX3d frozen_target;
   bool converged = false;
   const auto t_it = Clock::now();
   for (int it = 1; it <= u.max_iterations; ++it) {
@@ -388,11 +401,36 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         // a component without nodes: keep the previous field
       }
     }
-    D.clearConstraints();
-    add_markers(D);
-    for (Eigen::Index j = 0; j < V.rows(); ++j)
-      if (matched[std::size_t(j)])
-        D.addPositionConstraint(SurfacePoint::atVertex(int(j)), target.row(j).transpose(), w_data * std::sqrt(match_scale(j)));
+    // Once the radius schedule is done (and without Laplacian updating / remeshing, which change
+    // the system anyway), the constrained set and weights are frozen: later iterations only move
+    // targets, i.e. one back-substitution instead of a factorization, and vertices can no longer
+    // flicker in and out of the system. A frozen vertex that finds no match keeps its last target.
+    const bool freeze = u.freeze_constraints && frac >= 1.0 && !u.laplacian_updating && !u.remeshing;
+    if (freeze && !frozen_ids.empty()) {
+      for (Eigen::Index j = 0; j < V.rows(); ++j) {
+        const int id = frozen_ids[std::size_t(j)];
+        if (id < 0) continue;
+        if (matched[std::size_t(j)]) {
+          D.setPositionTarget(id, target.row(j).transpose());
+          frozen_target.row(j) = target.row(j);
+        } else {
+          target.row(j) = frozen_target.row(j);
+        }
+        matched[std::size_t(j)] = 1;
+      }
+      for (Eigen::Index j = 0; j < V.rows(); ++j)
+        if (frozen_ids[std::size_t(j)] < 0) matched[std::size_t(j)] = 0;
+    } else {
+      D.clearConstraints();
+      add_markers(D);
+      frozen_ids.assign(std::size_t(V.rows()), -1);
+      for (Eigen::Index j = 0; j < V.rows(); ++j)
+        if (matched[std::size_t(j)])
+          frozen_ids[std::size_t(j)] = D.addPositionConstraint(SurfacePoint::atVertex(int(j)), target.row(j).transpose(),
+                                                               w_data * std::sqrt(match_scale(j)));
+      frozen_target = target;
+      if (!freeze) frozen_ids.clear();
+    }
     const Eigen::MatrixX3d Vn = D.deform();
     rep.t_solve += since(tm);
     const Eigen::VectorXd moves = (Vn - V).rowwise().norm();

@@ -83,6 +83,9 @@ struct FitParameters {
   /// and interpolate it harmonically into unmatched regions (eq. 3.11), so holes inherit the
   /// local rotations of their rims instead of those extrapolated from a few markers.
   bool refine_rotations = false;
+  /// Once r has reached r_max, keep the constrained vertex set and weights fixed and only move the
+  /// targets: iterations cost a back-substitution instead of a factorization.
+  bool freeze_constraints = true;
   bool laplacian_updating = false;      ///< §5.5.1
   double updating_match_weight = 0.5;   ///< data weight with Laplacian updating
   bool remeshing = false;               ///< §5.5.2 (needs laplacian_updating; changes connectivity)
