@@ -6,6 +6,7 @@
 #include <cmath>
 #include <numeric>
 #include <set>
+#include <unordered_map>
 
 #include "tbsp/core/error.h"
 #include "tbsp/core/logging.h"
@@ -590,6 +591,74 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     rep.t_propagation = since(t0);
   }
 
+  // ---- fold repair (with fairing, §5.5.3): faces opposing the local cloud normals and edges
+  // whose faces are bent back by more than 120° are fold-overs; their vertices and one-rings get
+  // umbrella smoothing steps until none is left (at most 30 rounds)
+  auto flipped_faces = [&](const Eigen::MatrixX3d& X, std::vector<char>* mark) {
+    const Eigen::MatrixX3d FN = face_normals(X, F);
+    int flipped = 0;
+    if (mark) mark->assign(std::size_t(X.rows()), 0);
+    for (Eigen::Index f = 0; f < F.rows(); ++f) {
+      const Eigen::Vector3d c = (X.row(F(f, 0)) + X.row(F(f, 1)) + X.row(F(f, 2))).transpose() / 3.0;
+      double d2 = 0;
+      const Eigen::Index k = search.nearest(c, &d2);
+      if (k >= 0 && roi_ok[std::size_t(k)] && d2 < u.max_match_distance * u.max_match_distance && FN.row(f).dot(N.row(k)) < -0.5) {
+        ++flipped;
+        if (mark)
+          for (int q = 0; q < 3; ++q) (*mark)[std::size_t(F(f, q))] = 1;
+      }
+    }
+    return flipped;
+  };
+  auto folded_edges = [&](const Eigen::MatrixX3d& X, std::vector<char>* mark) {
+    const Eigen::MatrixX3d FN = face_normals(X, F);
+    std::unordered_map<std::uint64_t, Eigen::Index> first;
+    first.reserve(std::size_t(F.rows()) * 2);
+    int folds = 0;
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) {
+        const int a = F(f, k), b = F(f, (k + 1) % 3);
+        const std::uint64_t key = (std::uint64_t(std::uint32_t(std::min(a, b))) << 32) | std::uint32_t(std::max(a, b));
+        auto found = first.find(key);
+        if (found == first.end()) { first.emplace(key, f); continue; }
+        if (FN.row(f).dot(FN.row(found->second)) < -0.5) {
+          ++folds;
+          if (mark)
+            for (Eigen::Index g : {f, found->second})
+              for (int q = 0; q < 3; ++q) (*mark)[std::size_t(F(g, q))] = 1;
+        }
+      }
+    return folds;
+  };
+  if (u.fairing) {
+    t0 = Clock::now();
+    const auto adj = vertex_adjacency(F, V.rows());
+    std::vector<char> mark;
+    for (int round = 0; round < 30; ++round) {
+      mark.assign(std::size_t(V.rows()), 0);
+      const int bad = folded_edges(V, &mark);  // geometric: independent of estimated normals
+      if (bad == 0) break;
+      std::vector<char> region = mark;
+      for (int ring = 0; ring < 1 + round / 5; ++ring) {  // the region grows while folds persist
+        const std::vector<char> prev = region;
+        for (Eigen::Index i = 0; i < V.rows(); ++i)
+          if (prev[std::size_t(i)])
+            for (int j : adj[std::size_t(i)]) region[std::size_t(j)] = 1;
+      }
+      for (int step = 0; step < 5; ++step) {
+        Eigen::MatrixX3d Vs = V;
+        for (Eigen::Index i = 0; i < V.rows(); ++i) {
+          if (!region[std::size_t(i)] || adj[std::size_t(i)].empty()) continue;
+          Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+          for (int j : adj[std::size_t(i)]) c += V.row(j);
+          Vs.row(i) = 0.5 * V.row(i) + 0.5 * c / double(adj[std::size_t(i)].size());
+        }
+        V = Vs;
+      }
+    }
+    rep.t_fairing += since(t0);
+  }
+
   // ---- metrics (cloud ROI -> result)
   report_progress(progress, 0.95, "metrics");
   t0 = Clock::now();
@@ -610,17 +679,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     rep.p99 = s[std::size_t(0.99 * double(nq - 1))];
     rep.coverage_points = double((dist.array() <= u.max_match_distance).count()) / double(nq);
     // fold-overs: face normal against the cloud normals near the face centre
-    const Eigen::MatrixX3d FN = face_normals(V, F);
-    int flipped = 0;
-#pragma omp parallel for reduction(+ : flipped)
-    for (Eigen::Index f = 0; f < F.rows(); ++f) {
-      const Eigen::Vector3d c = (V.row(F(f, 0)) + V.row(F(f, 1)) + V.row(F(f, 2))).transpose() / 3.0;
-      double d2 = 0;
-      const Eigen::Index k = search.nearest(c, &d2);
-      if (k >= 0 && roi_ok[std::size_t(k)] && d2 < u.max_match_distance * u.max_match_distance && FN.row(f).dot(N.row(k)) < -0.5)
-        ++flipped;
-    }
+    const int flipped = flipped_faces(V, nullptr);
     rep.flipped_faces = flipped;
+    rep.folded_edges = folded_edges(V, nullptr);
   }
   rep.t_metrics = since(t0);
   rep.vertices = V.rows();
