@@ -1,0 +1,292 @@
+#include "tbsp/multiview/rasterizer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "tbsp/core/error.h"
+
+namespace tbsp {
+
+namespace {
+
+struct Projected {
+  std::vector<double> x, y, iz;  // screen position and 1/z per vertex
+  std::vector<char> ok;          // z > near
+};
+
+Projected project_vertices(const TriMesh& mesh, const Camera& cam, double near_plane) {
+  const Eigen::Index n = mesh.V.rows();
+  Projected p;
+  p.x.resize(n);
+  p.y.resize(n);
+  p.iz.resize(n);
+  p.ok.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Vector3d X = mesh.V.row(i).transpose();
+    const double z = cam.depth(X);
+    p.ok[i] = z > near_plane;
+    if (!p.ok[i]) {
+      p.x[i] = p.y[i] = p.iz[i] = 0;
+      continue;
+    }
+    const Eigen::Vector2d s = cam.project(X);
+    p.x[i] = s.x();
+    p.y[i] = s.y();
+    p.iz[i] = 1.0 / z;
+  }
+  return p;
+}
+
+inline double edge(double ax, double ay, double bx, double by, double px, double py) {
+  return (bx - ax) * (py - ay) - (by - ay) * (px - ax);
+}
+inline bool top_left(double ax, double ay, double bx, double by) {
+  return (ay == by && bx > ax) || (by < ay);
+}
+
+void check_mesh(const TriMesh& mesh, const char* who) {
+  if (mesh.V.rows() == 0 || mesh.F.rows() == 0)
+    throw InvalidInput(std::string("[tbsp::") + who + "] the mesh is empty (" + std::to_string(mesh.V.rows()) +
+                       " vertices, " + std::to_string(mesh.F.rows()) + " faces)");
+  const int n = static_cast<int>(mesh.V.rows());
+  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k)
+      if (mesh.F(f, k) < 0 || mesh.F(f, k) >= n)
+        throw InvalidInput(std::string("[tbsp::") + who + "] face " + std::to_string(f) + " references vertex " +
+                           std::to_string(mesh.F(f, k)) + " but the mesh has " + std::to_string(n) +
+                           " vertices; run `tbsp validate` on the mesh");
+  if (!mesh.V.allFinite()) throw InvalidInput(std::string("[tbsp::") + who + "] the mesh has NaN/Inf vertex coordinates");
+}
+
+}  // namespace
+
+cv::Mat RenderBuffers::maskImage() const {
+  cv::Mat m(height, width, CV_8UC1);
+  std::copy(mask.begin(), mask.end(), m.ptr<std::uint8_t>());
+  return m;
+}
+
+cv::Mat RenderBuffers::depthImage() const {
+  cv::Mat m(height, width, CV_32FC1);
+  std::copy(depth.begin(), depth.end(), m.ptr<float>());
+  return m;
+}
+
+void Rasterizer::render(const TriMesh& mesh, const Camera& cam, RenderBuffers& out) const {
+  check_mesh(mesh, "Rasterizer::render");
+  const int W = cam.width(), H = cam.height();
+  const std::size_t npix = static_cast<std::size_t>(W) * H;
+  out.width = W;
+  out.height = H;
+  out.skipped_near = 0;
+  // During rasterization `depth` holds 1/z (0 = empty); converted in the resolve pass.
+  out.depth.assign(npix, 0.0f);
+  out.face.assign(npix, -1);
+  const Projected p = project_vertices(mesh, cam, options_.near_plane);
+  const Eigen::Vector3d c = cam.center();
+
+  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
+    int i0 = mesh.F(f, 0), i1 = mesh.F(f, 1), i2 = mesh.F(f, 2);
+    if (!p.ok[i0] || !p.ok[i1] || !p.ok[i2]) {
+      ++out.skipped_near;
+      continue;
+    }
+    if (options_.cull_backfaces) {
+      const Eigen::Vector3d a = mesh.V.row(i0), b = mesh.V.row(i1), d = mesh.V.row(i2);
+      if ((b - a).cross(d - a).dot(c - a) <= 0) continue;
+    }
+    double area = edge(p.x[i0], p.y[i0], p.x[i1], p.y[i1], p.x[i2], p.y[i2]);
+    if (area == 0 || !std::isfinite(area)) continue;
+    if (area < 0) {
+      std::swap(i1, i2);
+      area = -area;
+    }
+    const double x0 = p.x[i0], y0 = p.y[i0], x1 = p.x[i1], y1 = p.y[i1], x2 = p.x[i2], y2 = p.y[i2];
+    const int xmin = std::max(0, static_cast<int>(std::ceil(std::min({x0, x1, x2}))));
+    const int xmax = std::min(W - 1, static_cast<int>(std::floor(std::max({x0, x1, x2}))));
+    const int ymin = std::max(0, static_cast<int>(std::ceil(std::min({y0, y1, y2}))));
+    const int ymax = std::min(H - 1, static_cast<int>(std::floor(std::max({y0, y1, y2}))));
+    if (xmin > xmax || ymin > ymax) continue;
+    const bool tl0 = top_left(x1, y1, x2, y2), tl1 = top_left(x2, y2, x0, y0), tl2 = top_left(x0, y0, x1, y1);
+    const double inv_area = 1.0 / area;
+    const double iz0 = p.iz[i0] * inv_area, iz1 = p.iz[i1] * inv_area, iz2 = p.iz[i2] * inv_area;
+    // Edge-function steps per pixel in x.
+    const double a0 = -(y2 - y1), a1 = -(y0 - y2), a2 = -(y1 - y0);
+    for (int y = ymin; y <= ymax; ++y) {
+      double w0 = edge(x1, y1, x2, y2, xmin, y);
+      double w1 = edge(x2, y2, x0, y0, xmin, y);
+      double w2 = edge(x0, y0, x1, y1, xmin, y);
+      float* drow = out.depth.data() + static_cast<std::size_t>(y) * W;
+      std::int32_t* frow = out.face.data() + static_cast<std::size_t>(y) * W;
+      for (int x = xmin; x <= xmax; ++x, w0 += a0, w1 += a1, w2 += a2) {
+        const bool in0 = w0 > 0 || (w0 == 0 && tl0);
+        const bool in1 = w1 > 0 || (w1 == 0 && tl1);
+        const bool in2 = w2 > 0 || (w2 == 0 && tl2);
+        if (!(in0 && in1 && in2)) continue;
+        const float iz = static_cast<float>(w0 * iz0 + w1 * iz1 + w2 * iz2);
+        if (iz > drow[x]) {
+          drow[x] = iz;
+          frow[x] = static_cast<std::int32_t>(f);
+        }
+      }
+    }
+  }
+
+  // Resolve: depth = 1/iz, barycentrics, mask.
+  out.mask.assign(npix, 0);
+  if (options_.barycentrics) out.bary.assign(2 * npix, 0.0f);
+  else out.bary.clear();
+  const float inf = std::numeric_limits<float>::infinity();
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t idx = static_cast<std::size_t>(y) * W + x;
+      const std::int32_t f = out.face[idx];
+      if (f < 0) {
+        out.depth[idx] = inf;
+        continue;
+      }
+      out.depth[idx] = 1.0f / out.depth[idx];
+      out.mask[idx] = 255;
+      if (!options_.barycentrics) continue;
+      const int i0 = mesh.F(f, 0), i1 = mesh.F(f, 1), i2 = mesh.F(f, 2);
+      const double area = edge(p.x[i0], p.y[i0], p.x[i1], p.y[i1], p.x[i2], p.y[i2]);
+      const double l0 = edge(p.x[i1], p.y[i1], p.x[i2], p.y[i2], x, y) / area;
+      const double l1 = edge(p.x[i2], p.y[i2], p.x[i0], p.y[i0], x, y) / area;
+      const double l2 = 1.0 - l0 - l1;
+      const double q0 = l0 * p.iz[i0], q1 = l1 * p.iz[i1], q2 = l2 * p.iz[i2];
+      const double s = q0 + q1 + q2;
+      out.bary[2 * idx] = static_cast<float>(q1 / s);
+      out.bary[2 * idx + 1] = static_cast<float>(q2 / s);
+    }
+  }
+}
+
+std::vector<RenderBuffers> Rasterizer::renderViews(const TriMesh& mesh, const std::vector<Camera>& cameras) const {
+  check_mesh(mesh, "Rasterizer::renderViews");
+  std::vector<RenderBuffers> out(cameras.size());
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int i = 0; i < static_cast<int>(cameras.size()); ++i) render(mesh, cameras[i], out[i]);
+  return out;
+}
+
+namespace {
+void require_bary(const RenderBuffers& b, const TriMesh& mesh, const char* who) {
+  if (b.bary.size() != 2 * b.face.size())
+    throw InvalidInput(std::string("[tbsp::") + who + "] the buffers have no barycentrics; render with RasterOptions::barycentrics = true");
+  for (std::int32_t f : b.face)
+    if (f >= mesh.F.rows())
+      throw InvalidInput(std::string("[tbsp::") + who + "] the buffers were rendered from a different mesh (face id " +
+                         std::to_string(f) + " >= " + std::to_string(mesh.F.rows()) + ")");
+}
+cv::Vec3b to_bgr(const Eigen::Vector3d& rgb) {
+  auto c = [](double v) { return static_cast<std::uint8_t>(std::lround(std::clamp(v, 0.0, 1.0) * 255.0)); };
+  return {c(rgb.z()), c(rgb.y()), c(rgb.x())};
+}
+}  // namespace
+
+cv::Mat shade_vertex_colors(const TriMesh& mesh, const RenderBuffers& b, const cv::Vec3b& background) {
+  require_bary(b, mesh, "shade_vertex_colors");
+  if (mesh.C.rows() != mesh.V.rows() || mesh.C.cols() != 3)
+    throw InvalidInput("[tbsp::shade_vertex_colors] the mesh has no per-vertex colours (C is " +
+                       std::to_string(mesh.C.rows()) + "x" + std::to_string(mesh.C.cols()) + ")");
+  cv::Mat img(b.height, b.width, CV_8UC3, background);
+  for (int y = 0; y < b.height; ++y) {
+    auto* row = img.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < b.width; ++x) {
+      const std::size_t idx = static_cast<std::size_t>(y) * b.width + x;
+      const std::int32_t f = b.face[idx];
+      if (f < 0) continue;
+      const double b1 = b.bary[2 * idx], b2 = b.bary[2 * idx + 1], b0 = 1 - b1 - b2;
+      const Eigen::Vector3d rgb = b0 * mesh.C.row(mesh.F(f, 0)).transpose() + b1 * mesh.C.row(mesh.F(f, 1)).transpose() +
+                                  b2 * mesh.C.row(mesh.F(f, 2)).transpose();
+      row[x] = to_bgr(rgb);
+    }
+  }
+  return img;
+}
+
+cv::Mat shade_texture(const TriMesh& mesh, const Eigen::MatrixX2d& uv, const cv::Mat& tex, const RenderBuffers& b,
+                      const cv::Vec3b& background) {
+  require_bary(b, mesh, "shade_texture");
+  if (uv.rows() != mesh.V.rows())
+    throw InvalidInput("[tbsp::shade_texture] " + std::to_string(uv.rows()) + " texture coordinates for " +
+                       std::to_string(mesh.V.rows()) + " vertices; give one (u, v) per vertex");
+  if (tex.empty() || tex.type() != CV_8UC3)
+    throw InvalidInput("[tbsp::shade_texture] the texture must be a non-empty 8-bit 3-channel image");
+  cv::Mat img(b.height, b.width, CV_8UC3, background);
+  const int TW = tex.cols, TH = tex.rows;
+  for (int y = 0; y < b.height; ++y) {
+    auto* row = img.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < b.width; ++x) {
+      const std::size_t idx = static_cast<std::size_t>(y) * b.width + x;
+      const std::int32_t f = b.face[idx];
+      if (f < 0) continue;
+      const double b1 = b.bary[2 * idx], b2 = b.bary[2 * idx + 1], b0 = 1 - b1 - b2;
+      const Eigen::Vector2d t = b0 * uv.row(mesh.F(f, 0)).transpose() + b1 * uv.row(mesh.F(f, 1)).transpose() +
+                                b2 * uv.row(mesh.F(f, 2)).transpose();
+      double u = t.x() - std::floor(t.x()), v = t.y() - std::floor(t.y());
+      const double tx = u * TW - 0.5, ty = (1.0 - v) * TH - 0.5;
+      const int x0 = static_cast<int>(std::floor(tx)), y0 = static_cast<int>(std::floor(ty));
+      const double fx = tx - x0, fy = ty - y0;
+      auto at = [&](int xx, int yy) -> const cv::Vec3b& {
+        xx = ((xx % TW) + TW) % TW;
+        yy = ((yy % TH) + TH) % TH;
+        return tex.at<cv::Vec3b>(yy, xx);
+      };
+      cv::Vec3b o;
+      for (int ch = 0; ch < 3; ++ch) {
+        const double val = (1 - fx) * (1 - fy) * at(x0, y0)[ch] + fx * (1 - fy) * at(x0 + 1, y0)[ch] +
+                           (1 - fx) * fy * at(x0, y0 + 1)[ch] + fx * fy * at(x0 + 1, y0 + 1)[ch];
+        o[ch] = static_cast<std::uint8_t>(std::lround(std::clamp(val, 0.0, 255.0)));
+      }
+      row[x] = o;
+    }
+  }
+  return img;
+}
+
+std::vector<int> rim_vertices(const TriMesh& mesh, const Camera& cam, const RenderBuffers& b, double tol) {
+  check_mesh(mesh, "rim_vertices");
+  if (b.width != cam.width() || b.height != cam.height() || b.face.size() != static_cast<std::size_t>(b.width) * b.height)
+    throw InvalidInput("[tbsp::rim_vertices] the buffers do not match the camera size; render this camera first");
+  const Eigen::Index n = mesh.V.rows();
+  const Eigen::Vector3d c = cam.center();
+  std::vector<char> front(n, 0), back(n, 0);
+  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
+    const Eigen::Vector3d a = mesh.V.row(mesh.F(f, 0)), bb = mesh.V.row(mesh.F(f, 1)), d = mesh.V.row(mesh.F(f, 2));
+    const double s = (bb - a).cross(d - a).dot(c - a);
+    auto& flag = s > 0 ? front : back;
+    for (int k = 0; k < 3; ++k) flag[mesh.F(f, k)] = 1;
+  }
+  const int W = b.width, H = b.height;
+  auto border = [&](int x, int y) {
+    if (b.face[static_cast<std::size_t>(y) * W + x] < 0) return false;
+    if (x == 0 || y == 0 || x == W - 1 || y == H - 1) return true;
+    const std::size_t i = static_cast<std::size_t>(y) * W + x;
+    return b.face[i - 1] < 0 || b.face[i + 1] < 0 || b.face[i - W] < 0 || b.face[i + W] < 0;
+  };
+  const double slack = 0.05 * bbox_diagonal(mesh.V);
+  const int r = static_cast<int>(std::ceil(tol));
+  std::vector<int> rim;
+  for (Eigen::Index v = 0; v < n; ++v) {
+    if (!front[v] || !back[v]) continue;
+    const Eigen::Vector3d X = mesh.V.row(v).transpose();
+    const double z = cam.depth(X);
+    if (!(z > 0)) continue;
+    const Eigen::Vector2d px = cam.project(X);
+    const int cx = static_cast<int>(std::lround(px.x())), cy = static_cast<int>(std::lround(px.y()));
+    bool found = false;
+    for (int y = std::max(0, cy - r); y <= std::min(H - 1, cy + r) && !found; ++y)
+      for (int x = std::max(0, cx - r); x <= std::min(W - 1, cx + r) && !found; ++x) {
+        if ((Eigen::Vector2d(x, y) - px).norm() > tol + 0.5) continue;
+        if (!border(x, y)) continue;
+        if (b.depth[static_cast<std::size_t>(y) * W + x] + slack < z) continue;  // hidden behind nearer surface
+        found = true;
+      }
+    if (found) rim.push_back(static_cast<int>(v));
+  }
+  return rim;
+}
+
+}  // namespace tbsp

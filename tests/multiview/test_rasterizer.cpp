@@ -1,0 +1,174 @@
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "tbsp/core/error.h"
+#include "tbsp/mesh/primitives.h"
+#include "tbsp/multiview/range_scanner.h"
+#include "tbsp/multiview/rasterizer.h"
+
+using namespace tbsp;
+
+namespace {
+// Exact hit depth (camera z) of the ray through pixel (x, y) with a sphere (centre S, radius r);
+// negative when the ray misses.
+double sphere_depth(const Camera& cam, int x, int y, const Eigen::Vector3d& S, double r) {
+  const Ray ray = cam.ray({double(x), double(y)});
+  const Eigen::Vector3d oc = ray.origin - S;
+  const double b = oc.dot(ray.direction), c = oc.squaredNorm() - r * r, disc = b * b - c;
+  if (disc < 0) return -1;
+  const double s = -b - std::sqrt(disc);
+  return cam.depth(ray.origin + s * ray.direction);
+}
+}  // namespace
+
+TEST(Rasterizer, SphereSilhouetteAndDepthMatchTheExactProjection) {
+  const double r = 1.0;
+  const Eigen::Vector3d S(0.3, -0.2, 0.1);
+  TriMesh sphere = make_icosphere(6, r);
+  sphere.V.rowwise() += S.transpose();
+  // An off-centre view (the silhouette is an ellipse) and a closer, wide one.
+  const std::vector<Camera> cams = {Camera::lookAt("a", 1004, 1004, 0.7, {3.5, 1.0, 2.0}, {1.0, 0.3, 0.0}, {0, 1, 0}),
+                                    Camera::lookAt("b", 640, 480, 1.4, {-0.5, 2.5, -2.5}, S, {0, 0, 1})};
+  const auto bufs = Rasterizer().renderViews(sphere, cams);
+  for (std::size_t v = 0; v < cams.size(); ++v) {
+    const Camera& cam = cams[v];
+    const RenderBuffers& b = bufs[v];
+    long inter = 0, uni = 0;
+    std::vector<double> derr;
+    for (int y = 0; y < cam.height(); ++y)
+      for (int x = 0; x < cam.width(); ++x) {
+        const double zd = sphere_depth(cam, x, y, S, r);
+        const bool exact = zd > 0, ours = b.covered(x, y);
+        inter += exact && ours;
+        uni += exact || ours;
+        if (exact && ours) derr.push_back(std::abs(b.depth[y * b.width + x] - zd));
+      }
+    const double iou = double(inter) / double(uni);
+    EXPECT_GE(iou, 0.995) << cam.name();
+    std::sort(derr.begin(), derr.end());
+    EXPECT_LT(derr[derr.size() / 2], 2e-4 * r) << cam.name();  // inscribed polytope: chord sag ~1e-4 r
+    EXPECT_LT(derr[derr.size() * 99 / 100], 5e-3 * r) << cam.name();
+    EXPECT_EQ(b.skipped_near, 0);
+    std::printf("  view %s: IoU %.5f, %ld px, median depth error %.2e r\n", cam.name().c_str(), iou, inter,
+                derr[derr.size() / 2] / r);
+  }
+}
+
+TEST(Rasterizer, BarycentricsArePerspectiveCorrect) {
+  const TriMesh sphere = make_icosphere(4, 1.0);
+  const Camera cam = Camera::lookAt("c", 320, 240, 1.2, {0, 0, 3}, {0, 0, 0}, {0, 1, 0});
+  RenderBuffers b;
+  Rasterizer().render(sphere, cam, b);
+  double worst = 0;
+  int n = 0;
+  for (int y = 0; y < b.height; ++y)
+    for (int x = 0; x < b.width; ++x) {
+      const std::size_t i = std::size_t(y) * b.width + x;
+      const int f = b.face[i];
+      if (f < 0) continue;
+      const double b1 = b.bary[2 * i], b2 = b.bary[2 * i + 1], b0 = 1 - b1 - b2;
+      EXPECT_GE(std::min({b0, b1, b2}), -1e-5);
+      const Eigen::Vector3d X = b0 * sphere.V.row(sphere.F(f, 0)) + b1 * sphere.V.row(sphere.F(f, 1)) +
+                                b2 * sphere.V.row(sphere.F(f, 2));
+      const Eigen::Vector2d p = cam.project(X);
+      worst = std::max(worst, (p - Eigen::Vector2d(x, y)).norm());
+      EXPECT_NEAR(cam.depth(X), b.depth[i], 1e-5);
+      ++n;
+    }
+  EXPECT_GT(n, 5000);
+  EXPECT_LT(worst, 2e-3);  // float barycentrics
+}
+
+TEST(Rasterizer, SharedEdgesLeaveNoGapsAndBackfacesCanBeCulled) {
+  // A plane filling the whole view, finely triangulated with jitter: every pixel covered.
+  TriMesh grid = make_grid(40, 30, 4.0, 3.0, 0.15, 7);
+  grid.V.rowwise() -= Eigen::RowVector3d(2.0, 1.5, 0.0);
+  const Camera cam = Camera::lookAt("g", 200, 150, 1.0, {0, 0, 1.2}, {0, 0, 0}, {0, 1, 0});
+  RenderBuffers b;
+  Rasterizer().render(grid, cam, b);
+  EXPECT_EQ(std::count(b.mask.begin(), b.mask.end(), 255), 200 * 150);
+  // The grid faces +z, towards the camera: culling keeps it; from below it disappears.
+  RasterOptions cull;
+  cull.cull_backfaces = true;
+  Rasterizer(cull).render(grid, cam, b);
+  EXPECT_EQ(std::count(b.mask.begin(), b.mask.end(), 255), 200 * 150);
+  const Camera below = Camera::lookAt("u", 200, 150, 1.0, {0, 0, -1.2}, {0, 0, 0}, {0, 1, 0});
+  Rasterizer(cull).render(grid, below, b);
+  EXPECT_EQ(std::count(b.mask.begin(), b.mask.end(), 255), 0);
+}
+
+TEST(Rasterizer, RimVerticesOfASphereLieOnItsContour) {
+  const double r = 1.0;
+  const TriMesh sphere = make_icosphere(5, r);
+  const Camera cam = Camera::lookAt("c", 800, 600, 0.9, {0.5, 0.8, 3.0}, {0.2, 0, 0}, {0, 1, 0});
+  RenderBuffers b;
+  Rasterizer().render(sphere, cam, b);
+  const std::vector<int> rim = rim_vertices(sphere, cam, b, 1.0);
+  ASSERT_GT(rim.size(), 100u);
+  const Eigen::Vector3d C = cam.center();
+  // Exact contour: the circle of tangency, where (v - C) is perpendicular to the normal v / r.
+  double worst_angle = 0, worst_px = 0;
+  for (int v : rim) {
+    const Eigen::Vector3d X = sphere.V.row(v).transpose();
+    const double cosang = X.normalized().dot((X - C).normalized());
+    worst_angle = std::max(worst_angle, std::abs(cosang));
+    // Distance in pixels to the exact silhouette boundary: walk along the image direction
+    // from the vertex until the ray misses the sphere.
+    const Eigen::Vector2d p = cam.project(X), dir = (p - cam.project(Eigen::Vector3d::Zero())).normalized();
+    double lo = -5, hi = 5;  // hit at lo, miss at hi
+    for (int it = 0; it < 40; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      const Ray ray = cam.ray(p + mid * dir);
+      const Eigen::Vector3d oc = ray.origin;
+      const double bb = oc.dot(ray.direction), disc = bb * bb - (oc.squaredNorm() - r * r);
+      (disc >= 0 ? lo : hi) = mid;
+    }
+    worst_px = std::max(worst_px, std::abs(lo));
+  }
+  EXPECT_LT(worst_angle, 0.12);  // within ~7 degrees of tangency (vertex spacing on a level-5 sphere)
+  EXPECT_LT(worst_px, 1.6);
+  std::printf("  %zu rim vertices, max |cos(view, normal)| %.3f, max distance to the exact contour %.2f px\n",
+              rim.size(), worst_angle, worst_px);
+  // Far-side vertices are never rim vertices.
+  for (int v : rim) EXPECT_LT(std::abs(sphere.V.row(v).dot((sphere.V.row(v).transpose() - C).normalized())), 0.2);
+}
+
+TEST(RangeScanner, PointsLieOnTheVisibleSideWithTheRequestedNoise) {
+  const TriMesh sphere = make_icosphere(5, 1.0);
+  const Camera cam = Camera::lookAt("c", 320, 240, 1.0, {0, 0, 3}, {0, 0, 0}, {0, 1, 0});
+  RangeScanOptions o;
+  o.noise_sigma = 0.01;
+  o.stride = 2;
+  o.seed = 9;
+  const auto cloud = range_scan(sphere, cam, o);
+  EXPECT_EQ(cloud.width, 160u);
+  EXPECT_EQ(cloud.height, 120u);
+  EXPECT_FALSE(cloud.is_dense);
+  RangeScanOptions clean_opt = o;
+  clean_opt.noise_sigma = 0;
+  const auto clean = range_scan(sphere, cam, clean_opt);
+  double s2 = 0;
+  int n = 0;
+  for (std::size_t i = 0; i < cloud.points.size(); ++i) {
+    const auto& p = cloud.points[i];
+    ASSERT_EQ(std::isfinite(p.x), std::isfinite(clean.points[i].x));
+    if (!std::isfinite(p.x)) continue;
+    const Eigen::Vector3d X(p.x, p.y, p.z), N(p.normal_x, p.normal_y, p.normal_z);
+    EXPECT_GT(N.dot(cam.center() - X), 0);  // normals face the scanner
+    EXPECT_GT(X.z(), -0.2);                   // only the visible hemisphere (+ grazing cut)
+    EXPECT_NEAR(clean.points[i].getVector3fMap().norm(), 1.0, 2e-3);  // on the (inscribed) sphere
+    s2 += (p.getVector3fMap() - clean.points[i].getVector3fMap()).squaredNorm();
+    ++n;
+  }
+  ASSERT_GT(n, 3000);
+  const double rms = std::sqrt(s2 / n);
+  EXPECT_NEAR(rms, 0.01, 0.0005);  // the requested noise, along the rays
+  // Same seed, same cloud; another seed differs.
+  const auto again = range_scan(sphere, cam, o);
+  EXPECT_EQ(std::memcmp(again.points.data(), cloud.points.data(), cloud.points.size() * sizeof(pcl::PointNormal)), 0);
+  EXPECT_THROW(range_scan(sphere, cam, RangeScanOptions{0.0, 0}), InvalidInput);
+  EXPECT_THROW(range_scan(TriMesh{}, cam), InvalidInput);
+}
