@@ -16,6 +16,7 @@ public:
   static TextBuffer load(const std::string& path);
 
   const std::string& path() const { return path_; }
+  const std::string& data() const { return data_; }
   bool atEnd() const { return pos_ >= data_.size(); }
   std::size_t pos() const { return pos_; }
   std::size_t remaining() const { return data_.size() - pos_; }

@@ -1,0 +1,143 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "test_util.h"
+#include "tbsp/core/error.h"
+#include "tbsp/io/camera_io.h"
+
+using namespace tbsp;
+
+namespace {
+std::vector<Camera> some_cameras(bool distortion) {
+  std::vector<Camera> cams;
+  for (int i = 0; i < 4; ++i) {
+    const double a = i * M_PI / 2;
+    Camera c = Camera::lookAt("view" + std::to_string(i) + ".png", 640, 480, 0.9, {3 * std::cos(a), 1.0, 3 * std::sin(a)}, {0, 0, 0}, {0, 1, 0});
+    Distortion d;
+    if (distortion) { d.k1 = -0.1 * i; d.k2 = 0.01; d.p1 = 1e-4; d.p2 = -2e-4; }
+    cams.emplace_back(c.name(), 640, 480, c.K(), c.R(), c.t(), d);
+  }
+  return cams;
+}
+void write(const std::filesystem::path& p, const std::string& s) { std::ofstream(p) << s; }
+void expect_same_projection(const Camera& a, const Camera& b) {
+  for (const Eigen::Vector3d& X : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.3, -0.2, 0.1), Eigen::Vector3d(-0.4, 0.5, 0.2)})
+    EXPECT_LT((a.project(X) - b.project(X)).norm(), 1e-6) << a.name();
+}
+std::string error_of(const std::function<void()>& f) {
+  try { f(); } catch (const FileError& e) { return e.what(); }
+  return "";
+}
+}  // namespace
+
+TEST(CameraIo, MiddleburyRoundTrip) {
+  const auto dir = test::temp_dir("mb");
+  const auto cams = some_cameras(false);
+  write_middlebury_par((dir / "x_par.txt").string(), cams);
+  const auto back = read_middlebury_par((dir / "x_par.txt").string(), 640, 480);
+  ASSERT_EQ(back.size(), cams.size());
+  for (std::size_t i = 0; i < cams.size(); ++i) {
+    EXPECT_EQ(back[i].name(), cams[i].name());
+    expect_same_projection(cams[i], back[i]);
+  }
+  EXPECT_THROW(write_middlebury_par((dir / "d_par.txt").string(), some_cameras(true)), InvalidInput);
+}
+
+TEST(CameraIo, ColmapRoundTripWithDistortionAndPixelConvention) {
+  const auto dir = test::temp_dir("colmap");
+  const auto cams = some_cameras(true);
+  write_colmap_text(dir.string(), cams);
+  const auto back = read_colmap_text(dir.string());
+  ASSERT_EQ(back.size(), cams.size());
+  for (std::size_t i = 0; i < cams.size(); ++i) expect_same_projection(cams[i], back[i]);
+  // A hand-written COLMAP model: the principal point (320, 240) in COLMAP's convention (pixel
+  // centres at +0.5) is (319.5, 239.5) in tbsp's.
+  write(dir / "cameras.txt", "# c\n1 SIMPLE_PINHOLE 640 480 500 320 240\n2 RADIAL 640 480 500 320 240 0.1 0.01\n");
+  write(dir / "images.txt", "# i\n1 1 0 0 0 0 0 2 1 a.png\n10 20 0.5 -1 1 5 1\n2 1 0 0 0 0 0 2 2 b.png\n\n");
+  const auto hand = read_colmap_text(dir.string());
+  ASSERT_EQ(hand.size(), 2u);
+  EXPECT_EQ(hand[0].name(), "a.png");
+  EXPECT_NEAR(hand[0].project({0, 0, 0}).x(), 319.5, 1e-12);
+  EXPECT_NEAR(hand[1].distortion().k2, 0.01, 1e-15);
+}
+
+TEST(CameraIo, ProjectionMatrixFormats) {
+  const auto dir = test::temp_dir("pmat");
+  const Camera c = some_cameras(false)[1];
+  write_projection_matrix((dir / "c.P").string(), c);
+  expect_same_projection(c, read_projection_matrix((dir / "c.P").string(), 640, 480));
+  // MIT .Pmat.cal style and XML-wrapped (dancer) style.
+  const Matrix34d P = c.P();
+  std::ostringstream plain;
+  plain.precision(17);
+  for (int r = 0; r < 3; ++r) plain << P(r, 0) << ' ' << P(r, 1) << ' ' << P(r, 2) << ' ' << P(r, 3) << "\n";
+  write(dir / "a.Pmat.cal", "CONTOUR\n" + plain.str());
+  write(dir / "b.xml", "<?xml version=\"1.0\" ?>\n<camera>\n" + plain.str() + "</camera>\n");
+  expect_same_projection(c, read_projection_matrix((dir / "a.Pmat.cal").string(), 640, 480));
+  expect_same_projection(c, read_projection_matrix((dir / "b.xml").string(), 640, 480));
+}
+
+TEST(CameraIo, MalformedFilesGiveClearErrors) {
+  const auto dir = test::temp_dir("badcam");
+  const std::string good_line = "v.png 500 0 320 0 500 240 0 0 1 1 0 0 0 1 0 0 0 1 0 0 2\n";
+  struct Case { const char* name; std::string text; const char* expect; };
+  const Case par[] = {
+      {"count", "x\n" + good_line, "number of cameras"},
+      {"absurd", "99999999999\n" + good_line, "not plausible"},
+      {"trunc", "2\n" + good_line, "file ends"},
+      {"short", "1\nv.png 500 0 320 0 500\n", "expected"},
+      {"nan", "1\nv.png 500 0 320 0 500 240 0 0 1 1 0 0 0 1 0 0 0 1 nan 0 2\n", ""},
+      {"notrot", "1\nv.png 500 0 320 0 500 240 0 0 1 2 0 0 0 1 0 0 0 1 0 0 2\n", "not a rotation"},
+      {"extra", "1\n" + good_line + "junk\n", "unexpected"},
+  };
+  for (const Case& c : par) {
+    const auto f = dir / (std::string(c.name) + "_par.txt");
+    write(f, c.text);
+    const std::string e = error_of([&] { read_middlebury_par(f.string(), 640, 480); });
+    EXPECT_NE(e, "") << c.name;
+    EXPECT_NE(e.find(f.string()), std::string::npos) << c.name << ": " << e;
+    EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
+  }
+  // Image size needed but the image is missing.
+  write(dir / "m_par.txt", "1\n" + good_line);
+  EXPECT_NE(error_of([&] { read_middlebury_par((dir / "m_par.txt").string()); }).find("pass the size"), std::string::npos);
+  EXPECT_NE(error_of([&] { read_middlebury_par((dir / "missing_par.txt").string()); }).find("no such file"), std::string::npos);
+
+  const Case pm[] = {{"eleven", "1 2 3 4 5 6 7 8 9 10 11\n", "exactly 12"},
+                     {"word", "1 2 3 4 five 6 7 8 9 10 11 12\n", "not a number"},
+                     {"singular", "1 0 0 0 0 1 0 0 0 0 0 1\n", "singular"},
+                     {"inf", "1 0 0 0 0 1 0 0 0 0 1 inf\n", "not finite"}};
+  for (const Case& c : pm) {
+    const auto f = dir / (std::string(c.name) + ".P");
+    write(f, c.text);
+    const std::string e = error_of([&] { read_projection_matrix(f.string(), 10, 10); });
+    EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
+    EXPECT_NE(e.find(f.string()), std::string::npos) << c.name << ": " << e;
+  }
+
+  const auto cm = dir / "colmap";
+  std::filesystem::create_directories(cm);
+  const Case cams[] = {{"model", "1 FISHEYE 640 480 1 2 3 4\n", "not supported"},
+                       {"params", "1 PINHOLE 640 480 1 2 3\n", "takes 4 parameters"},
+                       {"size", "1 PINHOLE -640 480 1 2 3 4\n", "positive integers"},
+                       {"nan", "1 PINHOLE 640 480 nan 2 3 4\n", "finite"}};
+  for (const Case& c : cams) {
+    write(cm / "cameras.txt", c.text);
+    write(cm / "images.txt", "1 1 0 0 0 0 0 0 1 a.png\n\n");
+    const std::string e = error_of([&] { read_colmap_text(cm.string()); });
+    EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
+    EXPECT_NE(e.find("cameras.txt:1"), std::string::npos) << c.name << ": " << e;
+  }
+  write(cm / "cameras.txt", "1 PINHOLE 640 480 500 500 320 240\n");
+  const Case imgs[] = {{"cam", "1 1 0 0 0 0 0 0 7 a.png\n\n", "not defined"},
+                       {"quat", "1 2 0 0 0 0 0 0 1 a.png\n\n", "quaternion"},
+                       {"fields", "1 1 0 0 0 0 0 1 a.png\n\n", "10 fields"}};
+  for (const Case& c : imgs) {
+    write(cm / "images.txt", c.text);
+    const std::string e = error_of([&] { read_colmap_text(cm.string()); });
+    EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
+  }
+  std::filesystem::remove(cm / "images.txt");
+  EXPECT_NE(error_of([&] { read_colmap_text(cm.string()); }).find("no such file"), std::string::npos);
+}
