@@ -7,6 +7,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 
+#include "capture_cmds.h"
 #include "progress_bar.h"
 #include "tbsp/core/error.h"
 #include "tbsp/core/logging.h"
@@ -386,6 +387,13 @@ int main(int argc, char** argv) {
   synth->add_option("--markers", sa.o.markers, "number of markers");
   synth->add_option("--seed", sa.o.seed, "random seed");
 
+  tbsp::cli::SynthStudioArgs ssa;
+  CLI::App* synth_studio = nullptr;
+  tbsp::cli::add_synth_studio(app, ssa, synth_studio);
+  tbsp::cli::ReplayArgs ra;
+  CLI::App* replay = nullptr;
+  tbsp::cli::add_replay(app, ra, replay);
+
   std::string demo_in = TBSP_SAMPLE_DATA_DIR, demo_out = "tbsp_demo_out";
   bool demo_quiet = false;
   auto* demo = app.add_subcommand("demo", "run the demos on sample_data/: template fitting (ch. 5) and bending (ch. 3)");
@@ -437,6 +445,8 @@ int main(int argc, char** argv) {
     }
     if (*demo) return cmd_demo(demo_in, demo_out, demo_quiet);
     if (*synth) return cmd_synth_scan(sa);
+    if (*synth_studio) return tbsp::cli::cmd_synth_studio(ssa);
+    if (*replay) return tbsp::cli::cmd_replay(ra);
   } catch (const tbsp::Cancelled& e) {
     std::cerr << "tbsp " << sub << ": cancelled: " << e.what() << "\n";
     return 130;
