@@ -75,16 +75,22 @@ cv::Mat RenderBuffers::depthImage() const {
 
 void Rasterizer::render(const TriMesh& mesh, const Camera& cam, RenderBuffers& out) const {
   check_mesh(mesh, "Rasterizer::render");
+  renderChecked(mesh, cam, out);
+}
+
+void Rasterizer::renderChecked(const TriMesh& mesh, const Camera& cam, RenderBuffers& out) const {
   const int W = cam.width(), H = cam.height();
   const std::size_t npix = static_cast<std::size_t>(W) * H;
   out.width = W;
   out.height = H;
   out.skipped_near = 0;
-  // During rasterization `depth` holds 1/z (0 = empty); converted in the resolve pass.
-  out.depth.assign(npix, 0.0f);
+  const float inf = std::numeric_limits<float>::infinity();
+  out.depth.assign(npix, inf);  // same size: a fill, no reallocation
   out.face.assign(npix, -1);
+  out.mask.assign(npix, 0);
   const Projected p = project_vertices(mesh, cam, options_.near_plane);
   const Eigen::Vector3d c = cam.center();
+  int cover_x0 = W, cover_x1 = -1, cover_y0 = H, cover_y1 = -1;
 
   for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
     int i0 = mesh.F(f, 0), i1 = mesh.F(f, 1), i2 = mesh.F(f, 2);
@@ -113,42 +119,59 @@ void Rasterizer::render(const TriMesh& mesh, const Camera& cam, RenderBuffers& o
     const double iz0 = p.iz[i0] * inv_area, iz1 = p.iz[i1] * inv_area, iz2 = p.iz[i2] * inv_area;
     // Edge-function steps per pixel in x.
     const double a0 = -(y2 - y1), a1 = -(y0 - y2), a2 = -(y1 - y0);
+    const std::int32_t fid = static_cast<std::int32_t>(f);
     for (int y = ymin; y <= ymax; ++y) {
-      double w0 = edge(x1, y1, x2, y2, xmin, y);
-      double w1 = edge(x2, y2, x0, y0, xmin, y);
-      double w2 = edge(x0, y0, x1, y1, xmin, y);
-      float* drow = out.depth.data() + static_cast<std::size_t>(y) * W;
-      std::int32_t* frow = out.face.data() + static_cast<std::size_t>(y) * W;
-      for (int x = xmin; x <= xmax; ++x, w0 += a0, w1 += a1, w2 += a2) {
+      const double e0 = edge(x1, y1, x2, y2, xmin, y);
+      const double e1 = edge(x2, y2, x0, y0, xmin, y);
+      const double e2 = edge(x0, y0, x1, y1, xmin, y);
+      // Span of x where all three edge functions are >= 0 (one pixel of slack each side; the
+      // exact test with the fill rule decides inside the span).
+      double lo = xmin, hi = xmax;
+      auto clip = [&](double e, double a) {
+        if (a > 0) lo = std::max(lo, xmin + std::floor(-e / a) - 1);
+        else if (a < 0) hi = std::min(hi, xmin + std::ceil(e / -a) + 1);
+        else if (e < 0) hi = lo - 1;
+      };
+      clip(e0, a0);
+      clip(e1, a1);
+      clip(e2, a2);
+      if (lo > hi) continue;
+      const int xs = static_cast<int>(lo), xe = static_cast<int>(hi);
+      double w0 = e0 + a0 * (xs - xmin), w1 = e1 + a1 * (xs - xmin), w2 = e2 + a2 * (xs - xmin);
+      const std::size_t row = static_cast<std::size_t>(y) * W;
+      float* drow = out.depth.data() + row;
+      std::int32_t* frow = out.face.data() + row;
+      std::uint8_t* mrow = out.mask.data() + row;
+      for (int x = xs; x <= xe; ++x, w0 += a0, w1 += a1, w2 += a2) {
         const bool in0 = w0 > 0 || (w0 == 0 && tl0);
         const bool in1 = w1 > 0 || (w1 == 0 && tl1);
         const bool in2 = w2 > 0 || (w2 == 0 && tl2);
         if (!(in0 && in1 && in2)) continue;
-        const float iz = static_cast<float>(w0 * iz0 + w1 * iz1 + w2 * iz2);
-        if (iz > drow[x]) {
-          drow[x] = iz;
-          frow[x] = static_cast<std::int32_t>(f);
+        const double iz = w0 * iz0 + w1 * iz1 + w2 * iz2;  // 1/z, perspective-correct
+        if (iz * drow[x] > 1.0) {                          // z < stored depth (inf passes)
+          drow[x] = static_cast<float>(1.0 / iz);
+          frow[x] = fid;
+          mrow[x] = 255;
+          cover_x0 = std::min(cover_x0, x);
+          cover_x1 = std::max(cover_x1, x);
+          cover_y0 = std::min(cover_y0, y);
+          cover_y1 = std::max(cover_y1, y);
         }
       }
     }
   }
 
-  // Resolve: depth = 1/iz, barycentrics, mask.
-  out.mask.assign(npix, 0);
-  if (options_.barycentrics) out.bary.assign(2 * npix, 0.0f);
-  else out.bary.clear();
-  const float inf = std::numeric_limits<float>::infinity();
-  for (int y = 0; y < H; ++y) {
-    for (int x = 0; x < W; ++x) {
+  // Barycentrics of the visible triangle at each covered pixel centre.
+  if (!options_.barycentrics) {
+    out.bary.clear();
+    return;
+  }
+  out.bary.assign(2 * npix, 0.0f);
+  for (int y = cover_y0; y <= cover_y1; ++y) {
+    for (int x = cover_x0; x <= cover_x1; ++x) {
       const std::size_t idx = static_cast<std::size_t>(y) * W + x;
       const std::int32_t f = out.face[idx];
-      if (f < 0) {
-        out.depth[idx] = inf;
-        continue;
-      }
-      out.depth[idx] = 1.0f / out.depth[idx];
-      out.mask[idx] = 255;
-      if (!options_.barycentrics) continue;
+      if (f < 0) continue;
       const int i0 = mesh.F(f, 0), i1 = mesh.F(f, 1), i2 = mesh.F(f, 2);
       const double area = edge(p.x[i0], p.y[i0], p.x[i1], p.y[i1], p.x[i2], p.y[i2]);
       const double l0 = edge(p.x[i1], p.y[i1], p.x[i2], p.y[i2], x, y) / area;
@@ -162,11 +185,16 @@ void Rasterizer::render(const TriMesh& mesh, const Camera& cam, RenderBuffers& o
   }
 }
 
-std::vector<RenderBuffers> Rasterizer::renderViews(const TriMesh& mesh, const std::vector<Camera>& cameras) const {
+void Rasterizer::renderViews(const TriMesh& mesh, const std::vector<Camera>& cameras, std::vector<RenderBuffers>& out) const {
   check_mesh(mesh, "Rasterizer::renderViews");
-  std::vector<RenderBuffers> out(cameras.size());
+  out.resize(cameras.size());
 #pragma omp parallel for schedule(dynamic, 1)
-  for (int i = 0; i < static_cast<int>(cameras.size()); ++i) render(mesh, cameras[i], out[i]);
+  for (int i = 0; i < static_cast<int>(cameras.size()); ++i) renderChecked(mesh, cameras[i], out[i]);
+}
+
+std::vector<RenderBuffers> Rasterizer::renderViews(const TriMesh& mesh, const std::vector<Camera>& cameras) const {
+  std::vector<RenderBuffers> out;
+  renderViews(mesh, cameras, out);
   return out;
 }
 

@@ -62,8 +62,12 @@ public:
   void render(const TriMesh& mesh, const Camera& camera, RenderBuffers& out) const;
   /// Renders all views in parallel (one view per thread).
   std::vector<RenderBuffers> renderViews(const TriMesh& mesh, const std::vector<Camera>& cameras) const;
+  /// Same, re-using `out`'s buffers (no allocation when the sizes are unchanged): the form for
+  /// per-frame loops (tracking, silhouette refinement).
+  void renderViews(const TriMesh& mesh, const std::vector<Camera>& cameras, std::vector<RenderBuffers>& out) const;
 
 private:
+  void renderChecked(const TriMesh& mesh, const Camera& camera, RenderBuffers& out) const;
   RasterOptions options_;
 };
 
