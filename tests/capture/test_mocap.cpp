@@ -15,6 +15,20 @@ std::string error_of(const std::function<void()>& f) {
   try { f(); } catch (const FileError& e) { return e.what(); }
   return "";
 }
+struct Case { const char* name; std::string text; const char* expect; };
+// Writes each case to DIR/NAME.EXT, reads it with `read`, and expects a FileError naming the
+// file and containing the expected phrase.
+template <typename Read>
+void expect_file_errors(const std::filesystem::path& dir, const char* ext, const std::vector<Case>& cases, Read read) {
+  for (const Case& c : cases) {
+    const auto f = dir / (std::string(c.name) + ext);
+    write(f, c.text);
+    const std::string e = error_of([&] { read(f.string()); });
+    EXPECT_NE(e, "") << c.name;
+    EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": '" << e << "'";
+    EXPECT_NE(e.find(f.string()), std::string::npos) << c.name;
+  }
+}
 MarkerTrajectories some_markers() {
   MarkerTrajectories m;
   m.names = {"LASI", "RASI", "C7"};
@@ -119,8 +133,7 @@ TEST(Trc, MalformedFilesGiveClearErrors) {
   std::ifstream in(dir / "good.trc");
   std::string good((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   auto replace = [&](const std::string& a, const std::string& b) { std::string s = good; s.replace(s.find(a), a.size(), b); return s; };
-  struct Case { const char* name; std::string text; const char* expect; };
-  const Case cases[] = {
+  expect_file_errors(dir, ".trc", {
       {"magic", "Hello\n" + good.substr(good.find('\n') + 1), "PathFileType"},
       {"truncated_rows", good.substr(0, good.rfind("8\t")), "NumFrames"},
       {"truncated_header", good.substr(0, 60), "file ends"},
@@ -129,14 +142,7 @@ TEST(Trc, MalformedFilesGiveClearErrors) {
       {"word", replace("0.125", "abc"), "not a number"},
       {"rate", replace("100\t100\t4", "-1\t100\t4"), "DataRate"},
       {"empty", "", "file ends"},
-  };
-  for (const Case& c : cases) {
-    const auto f = dir / (std::string(c.name) + ".trc");
-    write(f, c.text);
-    const std::string e = error_of([&] { read_trc(f.string()); });
-    EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": '" << e << "'";
-    EXPECT_NE(e.find(f.string()), std::string::npos) << c.name;
-  }
+  }, [](const std::string& f) { read_trc(f); });
   EXPECT_NE(error_of([&] { read_trc((dir / "missing.trc").string()); }).find("no such file"), std::string::npos);
 }
 
@@ -158,7 +164,6 @@ TEST(C3d, MinimalIntelFloatFileParses) {
 TEST(C3d, MalformedFilesGiveClearErrors) {
   const auto dir = test::temp_dir("c3dbad");
   const std::string good = make_c3d(3, 4, -1.0f);
-  struct Case { const char* name; std::string bytes; const char* expect; };
   std::string magic = good; magic[1] = 0x51;
   std::string dec = make_c3d(3, 4, -1.0f, 85);
   std::string mips = make_c3d(3, 4, -1.0f, 86);
@@ -167,7 +172,7 @@ TEST(C3d, MalformedFilesGiveClearErrors) {
   std::string zero_scale = good; { float v = 0; std::memcpy(&zero_scale[12], &v, 4); }
   std::string pblock = good; pblock[0] = 0;
   std::string badtype = good; badtype[512 + 4 + 5 + 5 + 2 + 4 + 2] = 7;  // type byte of POINT:USED
-  const Case cases[] = {
+  expect_file_errors(dir, ".c3d", {
       {"short", good.substr(0, 100), "shorter than the 512-byte"},
       {"magic", magic, "wrong magic"},
       {"dec", dec, "DEC"},
@@ -179,15 +184,7 @@ TEST(C3d, MalformedFilesGiveClearErrors) {
       {"type", badtype, "type"},
       {"truncated", good.substr(0, 1024 + 20), "truncated"},
       {"params_cut", good.substr(0, 530), ""},
-  };
-  for (const Case& c : cases) {
-    const auto f = dir / (std::string(c.name) + ".c3d");
-    write(f, c.bytes);
-    const std::string e = error_of([&] { read_c3d(f.string()); });
-    EXPECT_NE(e, "") << c.name;
-    EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": '" << e << "'";
-    EXPECT_NE(e.find(f.string()), std::string::npos) << c.name;
-  }
+  }, [](const std::string& f) { read_c3d(f); });
 }
 
 TEST(Bvh, RoundTripAndForwardKinematics) {
@@ -217,8 +214,7 @@ TEST(Bvh, RoundTripAndForwardKinematics) {
 TEST(Bvh, MalformedFilesGiveClearErrors) {
   const auto dir = test::temp_dir("bvhbad");
   const std::string head = "HIERARCHY\nROOT hip\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n}\nMOTION\n";
-  struct Case { const char* name; std::string text; const char* expect; };
-  const Case cases[] = {
+  expect_file_errors(dir, ".bvh", {
       {"magic", "HIERARCHIES\n", "HIERARCHY"},
       {"truncated", head.substr(0, 40), "expected 'CHANNELS'"},
       {"truncated2", head.substr(0, 21), "file ends"},
@@ -230,14 +226,7 @@ TEST(Bvh, MalformedFilesGiveClearErrors) {
       {"time", head + "Frames: 1\nFrame Time: -1\n1 2 3\n", "positive"},
       {"extra", head + "Frames: 1\nFrame Time: 0.1\n1 2 3\n4\n", "unexpected"},
       {"brace", "HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n CHANNELS 0\n", "missing '}'"},
-  };
-  for (const Case& c : cases) {
-    const auto f = dir / (std::string(c.name) + ".bvh");
-    write(f, c.text);
-    const std::string e = error_of([&] { read_bvh(f.string()); });
-    EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": '" << e << "'";
-    EXPECT_NE(e.find(f.string()), std::string::npos) << c.name;
-  }
+  }, [](const std::string& f) { read_bvh(f); });
   // Deep nesting does not overflow the stack.
   std::string deep = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 0\n";
   for (int i = 0; i < 5000; ++i) deep += "JOINT j\n{\nOFFSET 0 0 0\nCHANNELS 0\n";

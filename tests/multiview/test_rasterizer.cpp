@@ -172,3 +172,47 @@ TEST(RangeScanner, PointsLieOnTheVisibleSideWithTheRequestedNoise) {
   EXPECT_THROW(range_scan(sphere, cam, RangeScanOptions{0.0, 0}), InvalidInput);
   EXPECT_THROW(range_scan(TriMesh{}, cam), InvalidInput);
 }
+
+TEST(Rasterizer, TexturedAndVertexColouredShading) {
+  // A unit square in z = 0 with uv = (x, y) and a 4x4 checkerboard texture, seen head-on:
+  // every pixel shows the texel under its back-projected point.
+  TriMesh sq = make_grid(8, 8, 1.0, 1.0);
+  Eigen::MatrixX2d uv = sq.V.leftCols<2>();
+  cv::Mat tex(64, 64, CV_8UC3);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) tex.at<cv::Vec3b>(y, x) = ((x / 16 + y / 16) % 2) ? cv::Vec3b(255, 255, 255) : cv::Vec3b(0, 0, 200);
+  const Camera cam = Camera::lookAt("t", 200, 200, 0.6, {0.5, 0.5, 2.0}, {0.5, 0.5, 0}, {0, 1, 0});
+  RenderBuffers b;
+  Rasterizer().render(sq, cam, b);
+  const cv::Mat img = shade_texture(sq, uv, tex, b, {1, 2, 3});
+  int checked = 0, wrong = 0;
+  for (int y = 0; y < 200; ++y)
+    for (int x = 0; x < 200; ++x) {
+      if (!b.covered(x, y)) {
+        EXPECT_EQ(img.at<cv::Vec3b>(y, x), cv::Vec3b(1, 2, 3));
+        continue;
+      }
+      const Eigen::Vector3d X = cam.backProject({double(x), double(y)}, b.depth[y * 200 + x]);
+      const double fu = X.x() * 4, fv = (1 - X.y()) * 4;  // checker cell coordinates (v up)
+      if (std::abs(fu - std::round(fu)) < 0.05 || std::abs(fv - std::round(fv)) < 0.05) continue;  // cell borders blur
+      const bool white = (int(std::floor(fu)) + int(std::floor(fv))) % 2;
+      wrong += img.at<cv::Vec3b>(y, x) != (white ? cv::Vec3b(255, 255, 255) : cv::Vec3b(0, 0, 200));
+      ++checked;
+    }
+  EXPECT_GT(checked, 5000);
+  EXPECT_EQ(wrong, 0);
+  // Vertex colours: red varies linearly with x, so the image does too.
+  sq.C.resize(sq.V.rows(), 3);
+  for (Eigen::Index i = 0; i < sq.V.rows(); ++i) sq.C.row(i) << sq.V(i, 0), 0, 1;
+  const cv::Mat vc = shade_vertex_colors(sq, b);
+  for (int x = 60; x < 140; x += 20) {
+    const Eigen::Vector3d X = cam.backProject({double(x), 100.0}, b.depth[100 * 200 + x]);
+    EXPECT_NEAR(vc.at<cv::Vec3b>(100, x)[2], 255 * X.x(), 1.0);
+    EXPECT_EQ(vc.at<cv::Vec3b>(100, x)[0], 255);
+  }
+  EXPECT_THROW(shade_texture(sq, Eigen::MatrixX2d(3, 2), tex, b), InvalidInput);
+  RasterOptions nob;
+  nob.barycentrics = false;
+  Rasterizer(nob).render(sq, cam, b);
+  EXPECT_THROW(shade_vertex_colors(sq, b), InvalidInput);
+}
