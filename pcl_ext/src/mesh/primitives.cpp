@@ -1,7 +1,9 @@
 #include "tbsp/mesh/primitives.h"
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <map>
+#include <tuple>
 #include <random>
 #include <vector>
 
@@ -94,6 +96,54 @@ TriMesh make_tube(int rings, int segments, double length, double radius) {
     m.F.row(k++) << n, (s + 1) % segments, s;
     m.F.row(k++) << n + 1, (rings - 1) * segments + s, (rings - 1) * segments + (s + 1) % segments;
   }
+  return m;
+}
+
+TriMesh make_box(int nx, int ny, int nz, double sx, double sy, double sz) {
+  if (nx < 1 || ny < 1 || nz < 1 || !(sx > 0) || !(sy > 0) || !(sz > 0))
+    throw InvalidInput("[tbsp::make_box] divisions must be >= 1 and sizes > 0");
+  const int n[3] = {nx, ny, nz};
+  std::map<std::tuple<int, int, int>, int> index;
+  std::vector<Eigen::Vector3d> v;
+  auto vid = [&](int i, int j, int k) {
+    const auto key = std::make_tuple(i, j, k);
+    auto it = index.find(key);
+    if (it != index.end()) return it->second;
+    v.emplace_back(sx * i / nx, sy * j / ny, sz * k / nz);
+    return index[key] = int(v.size()) - 1;
+  };
+  std::vector<Eigen::Vector3i> f;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int side = 0; side < 2; ++side) {
+      const int a = (axis + 1) % 3, b = (axis + 2) % 3;
+      Eigen::Vector3d outward = Eigen::Vector3d::Zero();
+      outward(axis) = side ? 1 : -1;
+      for (int u = 0; u < n[a]; ++u)
+        for (int w = 0; w < n[b]; ++w) {
+          int q[4];
+          const int du[4] = {0, 1, 1, 0}, dw[4] = {0, 0, 1, 1};
+          for (int c4 = 0; c4 < 4; ++c4) {
+            int ijk[3];
+            ijk[axis] = side ? n[axis] : 0;
+            ijk[a] = u + du[c4];
+            ijk[b] = w + dw[c4];
+            q[c4] = vid(ijk[0], ijk[1], ijk[2]);
+          }
+          Eigen::Vector3i t1(q[0], q[1], q[2]), t2(q[0], q[2], q[3]);
+          const Eigen::Vector3d nrm = (v[std::size_t(q[1])] - v[std::size_t(q[0])]).cross(v[std::size_t(q[2])] - v[std::size_t(q[0])]);
+          if (nrm.dot(outward) < 0) {
+            std::swap(t1(1), t1(2));
+            std::swap(t2(1), t2(2));
+          }
+          f.push_back(t1);
+          f.push_back(t2);
+        }
+    }
+  TriMesh m;
+  m.V.resize(Eigen::Index(v.size()), 3);
+  for (std::size_t i = 0; i < v.size(); ++i) m.V.row(Eigen::Index(i)) = v[i].transpose();
+  m.F.resize(Eigen::Index(f.size()), 3);
+  for (std::size_t i = 0; i < f.size(); ++i) m.F.row(Eigen::Index(i)) = f[i].transpose();
   return m;
 }
 

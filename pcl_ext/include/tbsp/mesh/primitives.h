@@ -21,4 +21,9 @@ TriMesh make_grid(int nx, int ny, double sx = 1.0, double sy = 1.0, double jitte
 /// radius r, plus two cap centre vertices. Ring i lies at x = length·i/(rings−1).
 TriMesh make_tube(int rings, int segments, double length = 1.0, double radius = 0.1);
 
+/// \brief Closed box surface [0,sx]×[0,sy]×[0,sz] with nx × ny × nz quads per side direction
+/// (each split into two triangles), outward oriented, manifold, genus 0 — e.g. the bar of
+/// thesis Fig. 7.2/7.3 before tetrahedralization. \throws InvalidInput for n < 1 or size ≤ 0.
+TriMesh make_box(int nx, int ny, int nz, double sx = 1.0, double sy = 1.0, double sz = 1.0);
+
 }  // namespace tbsp
