@@ -1,5 +1,6 @@
 #include "tbsp/deform/deformation_transfer.h"
 
+#include <Eigen/LU>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
