@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "capture_cmds.h"
+#include "tet_cmds.h"
 #include "progress_bar.h"
 #include "tbsp/core/error.h"
 #include "tbsp/core/logging.h"
@@ -393,6 +394,9 @@ int main(int argc, char** argv) {
   tbsp::cli::ReplayArgs ra;
   CLI::App* replay = nullptr;
   tbsp::cli::add_replay(app, ra, replay);
+  tbsp::cli::TetDeformArgs tda;
+  CLI::App* tetdeform = nullptr;
+  tbsp::cli::add_tetdeform(app, tda, tetdeform);
 
   std::string demo_in = TBSP_SAMPLE_DATA_DIR, demo_out = "tbsp_demo_out";
   bool demo_quiet = false;
@@ -447,6 +451,7 @@ int main(int argc, char** argv) {
     if (*synth) return cmd_synth_scan(sa);
     if (*synth_studio) return tbsp::cli::cmd_synth_studio(ssa);
     if (*replay) return tbsp::cli::cmd_replay(ra);
+    if (*tetdeform) return tbsp::cli::cmd_tetdeform(tda);
   } catch (const tbsp::Cancelled& e) {
     std::cerr << "tbsp " << sub << ": cancelled: " << e.what() << "\n";
     return 130;

@@ -44,11 +44,13 @@ inline Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, const Eigen::Mat
   double det = inverse_transpose(H, Hit);
   if (!(det > 1e-10 * scale * scale * scale)) return closest_rotation(F);
   for (int k = 0; k < 30; ++k) {
-    const double gamma = std::cbrt(1.0 / det);
+    // determinant scaling (Higham) while far from orthogonal; plain Newton near convergence
+    const double gamma = std::abs(det - 1) > 1e-4 ? std::cbrt(1.0 / det) : 1.0;
     const Eigen::Matrix3d next = 0.5 * (gamma * H + Hit / gamma);
     const double change = (next - H).squaredNorm();
     H = next;
-    if (change < 1e-24) break;
+    // quadratic convergence: a step of size c leaves an error of about c^2
+    if (change < 1e-18) break;
     det = inverse_transpose(H, Hit);
   }
   return R0 * H;

@@ -1,0 +1,238 @@
+#include "tet_cmds.h"
+
+#include <chrono>
+#include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
+
+#include "progress_bar.h"
+#include "tbsp/core/error.h"
+#include "tbsp/deform/deformation_transfer.h"
+#include "tbsp/deform/tet_deformer.h"
+#include "tbsp/io/atomic_file.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/io/tet_mesh_io.h"
+#include "tbsp/mesh/point_search.h"
+#include "tbsp/mesh/tetrahedralize.h"
+#include "tbsp/plugins/json_file.h"
+#include "tbsp/plugins/tet_job_json.h"
+
+namespace fs = std::filesystem;
+
+namespace tbsp::cli {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+bool is_tet_file(const std::string& p) {
+  std::string ext = fs::path(p).extension().string();
+  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".mesh";
+}
+
+// The boundary surface of a tet mesh with only its referenced vertices.
+TriMesh compact_boundary(const Eigen::MatrixX3d& X, const Eigen::Matrix<int, Eigen::Dynamic, 4>& T) {
+  const Eigen::MatrixX3i F = tet_boundary_faces(T);
+  std::vector<int> id(std::size_t(X.rows()), -1);
+  int n = 0;
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k)
+      if (id[std::size_t(F(f, k))] < 0) id[std::size_t(F(f, k))] = n++;
+  TriMesh m;
+  m.V.resize(n, 3);
+  for (Eigen::Index i = 0; i < X.rows(); ++i)
+    if (id[std::size_t(i)] >= 0) m.V.row(id[std::size_t(i)]) = X.row(i);
+  m.F.resize(F.rows(), 3);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) m.F(f, k) = id[std::size_t(F(f, k))];
+  return m;
+}
+
+double mean_tet_edge(const TetMesh& t) {
+  double s = 0;
+  for (Eigen::Index j = 0; j < t.T.rows(); ++j) s += (t.V.row(t.T(j, 0)) - t.V.row(t.T(j, 1))).norm();
+  return s / double(std::max<Eigen::Index>(1, t.T.rows()));
+}
+}  // namespace
+
+void add_tetdeform(CLI::App& app, TetDeformArgs& a, CLI::App*& sub) {
+  sub = app.add_subcommand("tetdeform", "volumetric as-rigid-as-possible deformation on a tet mesh (thesis ch. 7) + transfer (§7.3)");
+  sub->add_option("--mesh", a.mesh, "input: a closed triangle mesh (.ply .obj .off .vtk) or a tet mesh (.mesh)")
+      ->required()->check(CLI::ExistingFile);
+  sub->add_option("--handles", a.handles, "handles JSON (docs/tetdeform_json.md)")->required()->check(CLI::ExistingFile);
+  sub->add_option("--out", a.out, "output: deformed input surface (.ply .obj .off .vtk) or tet mesh (.mesh)")->required();
+  sub->add_option("--tets", a.tets, "target tetrahedron count: the surface is decimated (QEM) and tetrahedralized "
+                                    "(TetGen); 0 = tetrahedralize at full resolution")->check(CLI::NonNegativeNumber);
+  sub->add_option("--iterations", a.iterations, "iterations (default: the handles file's, else 50)")->check(CLI::PositiveNumber);
+  sub->add_option("--rigid", a.rigid, "rigid regions JSON {\"rigid\": [region, ...]}")->check(CLI::ExistingFile);
+  sub->add_option("--stiffness", a.stiffness, "stiffness JSON {\"default\": s, \"regions\": [...]}")->check(CLI::ExistingFile);
+  sub->add_option("--report", a.report, "JSON report: sizes, per-step timings, E_nonrigid per iteration");
+  sub->add_option("--save-tets", a.save_tets, "also write the deformed tet mesh (.mesh)");
+  sub->add_flag("--no-rotation-interpolation", a.no_interpolation, "disable step (III)");
+  sub->add_flag("-q,--quiet", a.quiet, "no progress bar or summary");
+}
+
+int cmd_tetdeform(const TetDeformArgs& a) {
+  nlohmann::json rep;
+  const auto t_start = Clock::now();
+  // 1. input and tet mesh
+  const bool input_tets = is_tet_file(a.mesh);
+  TriMesh surface;
+  TetMesh tets;
+  bool decimated = false;
+  auto t0 = Clock::now();
+  if (input_tets) {
+    tets = read_tet_mesh(a.mesh);
+    surface = compact_boundary(tets.V, tets.T);
+  } else {
+    surface = read_mesh(a.mesh);
+    TriMesh dec;
+    try {
+      tets = tetrahedralize_to_size(surface, a.tets, {}, &dec);
+    } catch (const InvalidInput& e) {
+      throw InvalidInput(a.mesh + ": cannot be tetrahedralized: " + e.what());
+    } catch (const Error& e) {
+      throw Error(a.mesh + ": cannot be tetrahedralized: " + e.what());
+    }
+    decimated = dec.F.rows() != surface.F.rows() || tets.V.rows() < surface.V.rows() ||
+                !(tets.V.topRows(surface.V.rows()) - surface.V).isZero(0);
+  }
+  const double t_tetra = since(t0);
+  // nearest input vertex of each tet vertex (vertex-list regions, vertex handles)
+  const Eigen::Index n_in = input_tets ? tets.V.rows() : surface.V.rows();
+  std::vector<Eigen::Index> to_input(std::size_t(tets.V.rows()));
+  std::vector<double> dist(std::size_t(tets.V.rows()), 0.0);
+  if (input_tets) {
+    for (std::size_t i = 0; i < to_input.size(); ++i) to_input[i] = Eigen::Index(i);
+  } else {
+    const PointSearch ps(surface.V);
+    for (Eigen::Index i = 0; i < tets.V.rows(); ++i) {
+      double d2;
+      to_input[std::size_t(i)] = ps.nearest(tets.V.row(i).transpose(), &d2);
+      dist[std::size_t(i)] = std::sqrt(d2);
+    }
+  }
+  const double snap = 1.5 * mean_tet_edge(tets);
+
+  // 2. job files
+  TetJob job;
+  parse_tet_handles(load_json_file(a.handles), n_in, a.handles, job);
+  if (!a.rigid.empty()) parse_tet_rigid(load_json_file(a.rigid), n_in, a.rigid, job);
+  if (!a.stiffness.empty()) parse_tet_stiffness(load_json_file(a.stiffness), n_in, a.stiffness, job);
+
+  // 3. deformer
+  TetDeformer d;
+  d.setMesh(tets);
+  TetDeformerOptions o;
+  if (job.rotation_interpolation) o.rotation_interpolation = *job.rotation_interpolation;
+  if (a.no_interpolation) o.rotation_interpolation = false;
+  if (job.max_step_degrees) o.max_handle_step_deg = *job.max_step_degrees;
+  d.setOptions(o);
+  if (!job.stiffness.empty() || job.default_stiffness != 1.0) {
+    Eigen::VectorXd s = Eigen::VectorXd::Constant(tets.T.rows(), job.default_stiffness);
+    for (const auto& [r, v] : job.stiffness)
+      for (int t : resolve_region_tets(r, tets, to_input, dist, snap)) s(t) = v;
+    d.setStiffness(s);
+  }
+  for (std::size_t i = 0; i < job.rigid.size(); ++i) {
+    const auto ts = resolve_region_tets(job.rigid[i], tets, to_input, dist, snap);
+    if (ts.empty()) throw InvalidInput(a.rigid + ": rigid[" + std::to_string(i) + "] contains no tetrahedron; enlarge it");
+    d.addRigidRegion(ts);
+  }
+  for (const auto& h : job.handles) {
+    try {
+      if (h.kind == TetHandleSpec::Region) {
+        const auto vs = resolve_region_vertices(h.region, tets.V, to_input, dist, snap);
+        if (vs.empty())
+          throw InvalidInput("the region selects no vertex of the tet mesh (" + std::to_string(tets.V.rows()) +
+                             " vertices); enlarge it or use more tets");
+        d.addRegionHandle(vs, h.motion);
+      } else if (h.kind == TetHandleSpec::Vertex) {
+        if (input_tets || !decimated) d.addVertexHandle(h.vertex, h.target);
+        else d.addPointHandle(surface.V.row(h.vertex).transpose(), h.target);
+      } else {
+        d.addPointHandle(h.point, h.target);
+      }
+    } catch (const InvalidInput& e) {
+      throw InvalidInput(a.handles + ": " + h.where + ": " + e.what());
+    }
+  }
+  ProgressBar bar(!a.quiet);
+  d.setProgressCallback(bar.callback());
+  const int iterations = a.iterations > 0 ? a.iterations : job.iterations.value_or(50);
+  t0 = Clock::now();
+  try {
+    d.deform(iterations);
+  } catch (const InvalidInput& e) {
+    // handle-set problems surface at the first solve; name the file
+    throw InvalidInput(a.handles + ": " + e.what());
+  }
+  const double t_deform = since(t0);
+  bar.finish();
+  const TetDeformReport& r = d.report();
+
+  // 4. output
+  double t_pre = 0, t_apply = 0;
+  if (is_tet_file(a.out)) {
+    TetMesh outm = d.mesh();
+    outm.V = d.positions();
+    write_tet_mesh(a.out, outm);
+  } else {
+    TriMesh out = surface;
+    if (input_tets) {
+      out = compact_boundary(d.positions().topRows(tets.V.rows()), tets.T);
+    } else if (!decimated) {
+      out.V = d.positions().topRows(surface.V.rows());
+    } else {
+      DeformationTransfer dt;
+      dt.precompute(tets, surface.V);
+      t_pre = dt.precomputeSeconds();
+      t0 = Clock::now();
+      out.V = dt.apply(d.inputPositions());
+      t_apply = since(t0);
+    }
+    out.N.resize(0, 3);
+    write_mesh(a.out, out);
+  }
+  if (!a.save_tets.empty()) {
+    TetMesh outm = d.mesh();
+    outm.V = d.positions();
+    write_tet_mesh(a.save_tets, outm);
+  }
+
+  // 5. report
+  const int it = std::max(1, r.iterations);
+  rep["input"] = {{"mesh", a.mesh}, {"handles", a.handles}, {"vertices", n_in}};
+  rep["output"] = a.out;
+  rep["tet_mesh"] = {{"vertices", r.vertices}, {"tets", r.tets}, {"decimated", decimated}, {"added_vertices", r.added_vertices},
+                     {"split_tets", r.split_tets}, {"virtual_tets", r.virtual_tets}};
+  rep["handles"] = {{"vertex", r.vertex_handles}, {"region", r.region_handles}, {"point", r.point_handles},
+                    {"constrained_vertices", r.constrained_vertices}, {"rigid_regions", r.rigid_regions},
+                    {"rotation_handle_tets", r.rotation_handle_tets}};
+  rep["options"] = {{"iterations", iterations}, {"rotation_interpolation", o.rotation_interpolation},
+                    {"max_step_degrees", o.max_handle_step_deg}, {"tolerance", o.tolerance}};
+  rep["iterations"] = r.iterations;
+  rep["converged"] = r.converged;
+  rep["e_nonrigid"] = r.e_nonrigid;
+  rep["e_arap"] = r.e_arap;
+  rep["volume_ratio"] = r.volume_ratio;
+  rep["max_handle_residual"] = r.max_handle_residual;
+  rep["solver"] = r.backend;
+  const double per_it = (r.t_def + r.t_rotext + r.t_rotint + r.t_rigid + r.t_difupd) / it;
+  rep["timings_s"] = {{"tetrahedralize", t_tetra}, {"setup", r.t_setup}, {"factorize", r.t_factorize},
+                      {"factorize_rotint", r.t_factorize_rotint}, {"deform_total", t_deform},
+                      {"per_iteration", {{"def", r.t_def / it}, {"rotext", r.t_rotext / it}, {"rotint", r.t_rotint / it},
+                                         {"rigid", r.t_rigid / it}, {"difupd", r.t_difupd / it}, {"total", per_it}}},
+                      {"iterations_per_s", per_it > 0 ? 1.0 / per_it : 0.0},
+                      {"transfer_precompute", t_pre}, {"transfer_apply", t_apply}, {"total", since(t_start)}};
+  if (!a.report.empty()) write_text_file_atomic(a.report, rep.dump(2) + "\n");
+  if (!a.quiet)
+    std::cout << "tetdeform: " << r.vertices << " vertices / " << r.tets << " tets, " << r.iterations << " iterations ("
+              << (r.converged ? "converged" : "not converged") << "), E_nonrigid " << r.e_nonrigid.front() << " -> "
+              << r.e_nonrigid.back() << ", volume " << (r.volume_ratio - 1) * 100 << " %, " << (per_it > 0 ? 1.0 / per_it : 0)
+              << " iterations/s -> " << a.out << "\n";
+  return 0;
+}
+
+}  // namespace tbsp::cli
