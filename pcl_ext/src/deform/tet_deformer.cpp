@@ -69,9 +69,6 @@ struct TetDeformer::Solver {
   Eigen::SparseMatrix<double> Lfc;  // #free x #constrained
   Eigen::MatrixX3d Gs;              // 3#T x 3, rotated gradients (step V)
   // rotation interpolation over the tet dual graph
-  SparseCholesky rot_chol;
-  Eigen::SparseMatrix<double> rot_coupling;  // #free tets x #handle tets
-  std::vector<int> rot_free_tets, rot_handle_tets;
 };
 
 TetDeformer::TetDeformer() = default;
@@ -523,74 +520,25 @@ void TetDeformer::buildOperators() {
 }
 
 void TetDeformer::buildRotationInterpolation() {
+  // Step (III) interpolates over the vertices with the same operator L and the same
+  // eliminated (constrained) vertices as step (I), so it re-uses that factorization: one more
+  // back-substitution (4 right-hand sides) per iteration, no second factorization. Region-handle
+  // vertices carry their handle's rotation increment; other constrained vertices (vertex and
+  // point handles) carry none. A tet's increment is the normalized mean of its vertices'.
   const auto t0 = Clock::now();
-  const Eigen::Index m = mesh_.T.rows();
-  rot_tet_handle_.assign(std::size_t(m), -1);
-  rot_free_index_.assign(std::size_t(m), -1);
-  rotint_active_ = false;
-  report_.rotation_handle_tets = 0;
+  int regions = 0;
+  for (const auto& h : handles_) regions += h.kind == Handle::Region;
+  rotint_active_ = regions >= 1 && int(handles_.size()) >= 2 && !free_vertices_.empty();
   std::vector<int> owner(std::size_t(mesh_.V.rows()), -1);
   for (std::size_t hi = 0; hi < handles_.size(); ++hi)
     if (handles_[hi].kind == Handle::Region)
       for (int v : handles_[hi].vertices) owner[std::size_t(v)] = int(hi);
-  std::vector<int> handles_with_tets;
-  for (int need = 4; need >= 3; --need) {
-    for (Eigen::Index j = 0; j < m; ++j) {
-      if (virtual_[std::size_t(j)]) continue;
-      std::map<int, int> count;
-      for (int k = 0; k < 4; ++k)
-        if (owner[std::size_t(mesh_.T(j, k))] >= 0) ++count[owner[std::size_t(mesh_.T(j, k))]];
-      for (auto [h, c] : count)
-        if (c >= need && rot_tet_handle_[std::size_t(j)] < 0) rot_tet_handle_[std::size_t(j)] = h;
-    }
-    handles_with_tets.clear();
-    for (int h : rot_tet_handle_)
-      if (h >= 0 && std::find(handles_with_tets.begin(), handles_with_tets.end(), h) == handles_with_tets.end())
-        handles_with_tets.push_back(h);
-    int regions = 0;
-    for (const auto& h : handles_) regions += h.kind == Handle::Region;
-    if (int(handles_with_tets.size()) == regions) break;  // every region has whole tets
-    if (need == 3) break;
-    std::fill(rot_tet_handle_.begin(), rot_tet_handle_.end(), -1);
+  report_.rotation_handle_tets = 0;
+  for (Eigen::Index j = 0; j < mesh_.T.rows(); ++j) {
+    const int h = owner[std::size_t(mesh_.T(j, 0))];
+    if (h >= 0 && owner[std::size_t(mesh_.T(j, 1))] == h && owner[std::size_t(mesh_.T(j, 2))] == h && owner[std::size_t(mesh_.T(j, 3))] == h)
+      ++report_.rotation_handle_tets;
   }
-  if (handles_with_tets.size() < 2) return;  // interpolation needs two orientations to interpolate between
-  solver_->rot_free_tets.clear();
-  solver_->rot_handle_tets.clear();
-  std::vector<int> hidx(std::size_t(m), -1);
-  for (Eigen::Index j = 0; j < m; ++j) {
-    if (rot_tet_handle_[std::size_t(j)] >= 0) {
-      hidx[std::size_t(j)] = int(solver_->rot_handle_tets.size());
-      solver_->rot_handle_tets.push_back(int(j));
-    } else {
-      rot_free_index_[std::size_t(j)] = int(solver_->rot_free_tets.size());
-      solver_->rot_free_tets.push_back(int(j));
-    }
-  }
-  report_.rotation_handle_tets = Eigen::Index(solver_->rot_handle_tets.size());
-  const auto N = tet_face_neighbours(mesh_.T);
-  const Eigen::Index nf = Eigen::Index(solver_->rot_free_tets.size());
-  std::vector<Eigen::Triplet<double>> tl, tc;
-  const double anchor = 1e-10;  // keeps components without handle tets definite
-  for (Eigen::Index i = 0; i < nf; ++i) {
-    const int j = solver_->rot_free_tets[std::size_t(i)];
-    double deg = anchor;
-    for (int k = 0; k < 4; ++k) {
-      const int o = N(j, k);
-      if (o < 0) continue;
-      deg += 1;
-      if (rot_free_index_[std::size_t(o)] >= 0)
-        tl.emplace_back(int(i), rot_free_index_[std::size_t(o)], -1.0);
-      else
-        tc.emplace_back(int(i), hidx[std::size_t(o)], 1.0);
-    }
-    tl.emplace_back(int(i), int(i), deg);
-  }
-  Eigen::SparseMatrix<double> Lr(nf, nf);
-  Lr.setFromTriplets(tl.begin(), tl.end());
-  solver_->rot_coupling.resize(nf, Eigen::Index(solver_->rot_handle_tets.size()));
-  solver_->rot_coupling.setFromTriplets(tc.begin(), tc.end());
-  if (nf > 0) solver_->rot_chol.compute(Lr);
-  rotint_active_ = nf > 0;
   report_.t_factorize_rotint = seconds_since(t0);
 }
 
@@ -636,25 +584,26 @@ double TetDeformer::iterate() {
         any = any || q.vec().norm() > 1e-15;
       }
     if (any) {
-      const auto& ht = solver_->rot_handle_tets;
-      Eigen::MatrixXd Qh(Eigen::Index(ht.size()), 4);
-      for (std::size_t i = 0; i < ht.size(); ++i) {
-        const int j = ht[i];
-        const Eigen::Quaterniond& q = dq[std::size_t(rot_tet_handle_[std::size_t(j)])];
-        Qh.row(Eigen::Index(i)) << q.w(), q.x(), q.y(), q.z();
-        R_[std::size_t(j)] = q.toRotationMatrix() * R_[std::size_t(j)];
+      const Eigen::Index nc = Eigen::Index(constrained_vertices_.size());
+      Eigen::MatrixXd Qc(nc, 4);
+      for (Eigen::Index i = 0; i < nc; ++i) {
+        const int h = constraint_handle_[std::size_t(i)];
+        const Eigen::Quaterniond& q = h >= 0 ? dq[std::size_t(h)] : Eigen::Quaterniond::Identity();
+        Qc.row(i) << q.w(), q.x(), q.y(), q.z();
       }
-      Eigen::MatrixXd rhs = solver_->rot_coupling * Qh;
-      rhs.col(0).array() += 1e-10;  // anchor towards the identity (components without handle tets)
-      const Eigen::MatrixXd Q = solver_->rot_chol.solve(rhs);
-      const auto& ft = solver_->rot_free_tets;
-#pragma omp parallel for schedule(static) if (ft.size() > 2000)
-      for (std::size_t i = 0; i < ft.size(); ++i) {
-        Eigen::Quaterniond q(Q(Eigen::Index(i), 0), Q(Eigen::Index(i), 1), Q(Eigen::Index(i), 2), Q(Eigen::Index(i), 3));
+      const Eigen::MatrixXd Qf = solver_->chol.solve(-(solver_->Lfc * Qc));
+      auto vertex_q = [&](int v) -> Eigen::Vector4d {
+        const int f = free_index_[std::size_t(v)];
+        return f >= 0 ? Eigen::Vector4d(Qf.row(f).transpose()) : Eigen::Vector4d(Qc.row(constrained_index_[std::size_t(v)]).transpose());
+      };
+#pragma omp parallel for schedule(static) if (m > 2000)
+      for (Eigen::Index j = 0; j < m; ++j) {
+        Eigen::Vector4d q = Eigen::Vector4d::Zero();
+        for (int k = 0; k < 4; ++k) q += vertex_q(mesh_.T(j, k));
         const double nq = q.norm();
         if (!(nq > 1e-12)) continue;
-        q.coeffs() /= nq;
-        R_[std::size_t(ft[i])] = q.toRotationMatrix() * R_[std::size_t(ft[i])];
+        q /= nq;
+        R_[std::size_t(j)] = Eigen::Quaterniond(q(0), q(1), q(2), q(3)).toRotationMatrix() * R_[std::size_t(j)];
       }
 #pragma omp parallel for schedule(static) if (m > 2000)
       for (Eigen::Index j = 0; j < m; ++j)

@@ -15,12 +15,12 @@
 ///         collapsed tet falls back to the SVD's closest proper rotation, so det R_j = +1);
 ///   (III) rotation interpolation (optional): when region handles turn, their rotation
 ///         increments since the previous iteration (relative rotations, at most
-///         max_handle_step) are interpolated harmonically as unit quaternions over the face-
-///         adjacency graph of the tets (prefactored once; the tets whose four vertices lie in a
-///         handle are the boundary values) and applied to the current R_j. Being relative and
-///         incremental, handles that turn by more than 180° in total are fine. Needs two
-///         region handles with whole tets; done before the solve so that it already sees the
-///         handles' new orientation;
+///         max_handle_step) are interpolated harmonically as unit quaternions over the
+///         vertices — with L and the eliminated vertices of step (I), so the same factorization
+///         serves (one more back-substitution); other handles' vertices carry no increment —
+///         and each tet's R_j is turned by the normalized mean of its vertices' increments.
+///         Being relative and incremental, handles that turn by more than 180° in total are
+///         fine. Done before the solve so that it already sees the handles' new orientation;
 ///   (IV)  rigid regions: every tet of a region gets the volume-weighted mean rotation;
 ///   (V)   differential-coordinate update δ = Gᵀ D S (g Rᵀ).
 /// E_nonrigid = Σ_j ‖S_j − I‖_F (eq. 7.5) is measured in step (II) of every iteration.
@@ -215,8 +215,6 @@ private:
   Eigen::MatrixX3d rhs_c_;   // L_fc X_c
   Eigen::MatrixX3d Xc_;
   // rotation interpolation
-  std::vector<int> rot_tet_handle_;  // per tet: region handle id or -1
-  std::vector<int> rot_free_index_;  // per tet index in free system or -1
   bool rotint_active_ = false;
 
   // state
