@@ -138,6 +138,7 @@ TEST_F(Bar, SoftMiddleConcentratesTheBending) {
     return (b - a) / 90.0;
   };
   const double uniform = run(false), soft = run(true);
+  std::printf("share of the 90-degree bend between x = 0.35 and 0.65: %.2f uniform, %.2f with stiffness 0.05 there\n", uniform, soft);
   EXPECT_GT(soft, uniform + 0.25) << "uniform " << uniform << " soft " << soft;
   EXPECT_GT(soft, 0.7);
 }

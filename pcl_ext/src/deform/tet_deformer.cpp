@@ -27,9 +27,10 @@ inline double inverse_transpose(const Eigen::Matrix3d& H, Eigen::Matrix3d& out) 
   const Eigen::Vector3d c1 = H.col(2).cross(H.col(0));
   const Eigen::Vector3d c2 = H.col(0).cross(H.col(1));
   const double det = H.col(0).dot(c0);
-  out.col(0) = c0 / det;
-  out.col(1) = c1 / det;
-  out.col(2) = c2 / det;
+  const double inv = 1.0 / det;
+  out.col(0) = c0 * inv;
+  out.col(1) = c1 * inv;
+  out.col(2) = c2 * inv;
   return det;
 }
 
@@ -49,8 +50,8 @@ inline Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, const Eigen::Mat
     const Eigen::Matrix3d next = 0.5 * (gamma * H + Hit / gamma);
     const double change = (next - H).squaredNorm();
     H = next;
-    // quadratic convergence: a step of size c leaves an error of about c^2
-    if (change < 1e-18) break;
+    // quadratic convergence: a step of size c leaves an error of about c^2 (here < 1e-14)
+    if (change < 1e-14) break;
     det = inverse_transpose(H, Hit);
   }
   return R0 * H;
@@ -626,16 +627,19 @@ double TetDeformer::iterate() {
   // (II) rotation extraction
   t0 = Clock::now();
   double energy = 0, arap = 0;
+  Xrow_ = X_;  // row-major copy: the four corners of a tet are 4 contiguous triples
 #pragma omp parallel for reduction(+ : energy, arap) schedule(static) if (m > 2000)
   for (Eigen::Index j = 0; j < m; ++j) {
     const Eigen::Map<const Mat34> Gj(G_.row(j).data());
     Eigen::Matrix<double, 4, 3> Xj;
-    for (int k = 0; k < 4; ++k) Xj.row(k) = X_.row(mesh_.T(j, k));
+    for (int k = 0; k < 4; ++k) Xj.row(k) = Xrow_.row(mesh_.T(j, k));
     const Eigen::Matrix3d F = (Gj * Xj).transpose();  // deformation gradient x' = F x
     const Eigen::Matrix3d R = polar_rotation(F, R_[std::size_t(j)]);
     R_[std::size_t(j)] = R;
-    energy += (R.transpose() * F - Eigen::Matrix3d::Identity()).norm();
-    arap += weight_(j) * (F - R).squaredNorm();
+    // S = Rᵀ F; ‖F − R‖ = ‖S − I‖ for orthogonal R
+    const double e2 = (R.transpose() * F - Eigen::Matrix3d::Identity()).squaredNorm();
+    energy += std::sqrt(e2);
+    arap += weight_(j) * e2;
   }
   report_.t_rotext += seconds_since(t0);
 

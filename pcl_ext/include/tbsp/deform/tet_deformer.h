@@ -219,6 +219,7 @@ private:
 
   // state
   Eigen::MatrixX3d X_;
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> Xrow_;
   std::vector<Eigen::Matrix3d> R_;
   int ramp_iteration_ = 0, ramp_steps_ = 1;
   TetDeformReport report_;
