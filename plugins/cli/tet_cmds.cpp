@@ -31,24 +31,6 @@ bool is_tet_file(const std::string& p) {
   return ext == ".mesh";
 }
 
-// The boundary surface of a tet mesh with only its referenced vertices.
-TriMesh compact_boundary(const Eigen::MatrixX3d& X, const Eigen::Matrix<int, Eigen::Dynamic, 4>& T) {
-  const Eigen::MatrixX3i F = tet_boundary_faces(T);
-  std::vector<int> id(std::size_t(X.rows()), -1);
-  int n = 0;
-  for (Eigen::Index f = 0; f < F.rows(); ++f)
-    for (int k = 0; k < 3; ++k)
-      if (id[std::size_t(F(f, k))] < 0) id[std::size_t(F(f, k))] = n++;
-  TriMesh m;
-  m.V.resize(n, 3);
-  for (Eigen::Index i = 0; i < X.rows(); ++i)
-    if (id[std::size_t(i)] >= 0) m.V.row(id[std::size_t(i)]) = X.row(i);
-  m.F.resize(F.rows(), 3);
-  for (Eigen::Index f = 0; f < F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) m.F(f, k) = id[std::size_t(F(f, k))];
-  return m;
-}
-
 double mean_tet_edge(const TetMesh& t) {
   double s = 0;
   for (Eigen::Index j = 0; j < t.T.rows(); ++j) s += (t.V.row(t.T(j, 0)) - t.V.row(t.T(j, 1))).norm();
@@ -84,7 +66,7 @@ int cmd_tetdeform(const TetDeformArgs& a) {
   auto t0 = Clock::now();
   if (input_tets) {
     tets = read_tet_mesh(a.mesh);
-    surface = compact_boundary(tets.V, tets.T);
+    surface = tet_boundary_surface(tets.V, tets.T);
   } else {
     surface = read_mesh(a.mesh);
     TriMesh dec;
@@ -181,7 +163,7 @@ int cmd_tetdeform(const TetDeformArgs& a) {
   } else {
     TriMesh out = surface;
     if (input_tets) {
-      out = compact_boundary(d.positions().topRows(tets.V.rows()), tets.T);
+      out = tet_boundary_surface(d.positions().topRows(tets.V.rows()), tets.T);
     } else if (!decimated) {
       out.V = d.positions().topRows(surface.V.rows());
     } else {

@@ -6,22 +6,15 @@
 #include <fstream>
 #include <sstream>
 
+#include "cli_util.h"
 #include "test_util.h"
 #include "tbsp/io/studio.h"
 
 using namespace tbsp;
 
 namespace {
-struct CliResult {
-  int code;
-  std::string out, err;
-};
-CliResult run(const std::string& args, const std::filesystem::path& dir) {
-  const std::string outf = (dir / "stdout.txt").string(), errf = (dir / "stderr.txt").string();
-  const int rc = std::system((std::string(TBSP_CLI) + " " + args + " >" + outf + " 2>" + errf).c_str());
-  auto slurp = [](const std::string& f) { std::ifstream in(f); std::stringstream ss; ss << in.rdbuf(); return ss.str(); };
-  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, slurp(outf), slurp(errf)};
-}
+using test::CliResult;
+CliResult run(const std::string& args, const std::filesystem::path& dir) { return test::run_cli(args, dir); }
 }  // namespace
 
 TEST(CliCapture, SynthStudioThenReplayAndMissingFrames) {

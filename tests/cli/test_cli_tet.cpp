@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "cli_util.h"
 #include "test_util.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/tet_mesh_io.h"
@@ -16,18 +17,8 @@
 using namespace tbsp;
 
 namespace {
-struct CliResult {
-  int code;
-  std::string err;
-};
-CliResult run(const std::string& args, const std::filesystem::path& dir) {
-  const std::string errf = (dir / "stderr.txt").string();
-  const int rc = std::system((std::string(TBSP_CLI) + " " + args + " >/dev/null 2>" + errf).c_str());
-  std::ifstream in(errf);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, ss.str()};
-}
+using test::CliResult;
+CliResult run(const std::string& args, const std::filesystem::path& dir) { return test::run_cli(args, dir); }
 std::string write(const std::filesystem::path& p, const std::string& text) {
   std::ofstream(p) << text;
   return p.string();

@@ -313,23 +313,9 @@ TEST(TetDeformerErrors, BadInputGivesClearErrors) {
 // the same surface). Metrics on the closed boundary surface: |enclosed volume change| and the
 // mean relative edge-length change. The tet deformer must be better on both, in every case.
 TEST_F(Bar, Fig83CasesBeatTheLinearLaplacian) {
-  const Eigen::MatrixX3i F = tet_boundary_faces(mesh().T);
-  TriMesh surf;
-  surf.V = mesh().V;
-  surf.F = F;
-  // drop interior vertices for the surface deformer (keep indices by remapping)
-  std::vector<int> id(std::size_t(mesh().V.rows()), -1);
-  int n = 0;
-  for (Eigen::Index f = 0; f < F.rows(); ++f)
-    for (int k = 0; k < 3; ++k)
-      if (id[std::size_t(F(f, k))] < 0) id[std::size_t(F(f, k))] = n++;
-  TriMesh s;
-  s.V.resize(n, 3);
-  s.F.resize(F.rows(), 3);
-  for (Eigen::Index i = 0; i < mesh().V.rows(); ++i)
-    if (id[std::size_t(i)] >= 0) s.V.row(id[std::size_t(i)]) = mesh().V.row(i);
-  for (Eigen::Index f = 0; f < F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) s.F(f, k) = id[std::size_t(F(f, k))];
+  std::vector<int> id;  // tet vertex -> surface vertex (-1 interior)
+  const TriMesh s = tet_boundary_surface(mesh().V, mesh().T, &id);
+  const Eigen::Index n = s.V.rows();
   const double vol0 = test::enclosed_volume(s.V, s.F);
 
   struct Case { const char* name; RigidMotion m; };

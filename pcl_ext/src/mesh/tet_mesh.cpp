@@ -84,6 +84,24 @@ TriMesh tet_boundary_mesh(const TetMesh& mesh) {
   return m;
 }
 
+TriMesh tet_boundary_surface(const Eigen::MatrixX3d& X, const TetIndices& T, std::vector<int>* vertex_map) {
+  const Eigen::MatrixX3i F = tet_boundary_faces(T);
+  std::vector<int> id(static_cast<std::size_t>(X.rows()), -1);
+  int n = 0;
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k)
+      if (id[std::size_t(F(f, k))] < 0) id[std::size_t(F(f, k))] = n++;
+  TriMesh m;
+  m.V.resize(n, 3);
+  for (Eigen::Index i = 0; i < X.rows(); ++i)
+    if (id[std::size_t(i)] >= 0) m.V.row(id[std::size_t(i)]) = X.row(i);
+  m.F.resize(F.rows(), 3);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) m.F(f, k) = id[std::size_t(F(f, k))];
+  if (vertex_map) *vertex_map = std::move(id);
+  return m;
+}
+
 TetIndices tet_face_neighbours(const TetIndices& T) {
   TetIndices N = TetIndices::Constant(T.rows(), 4, -1);
   const auto f = sorted_faces(T);

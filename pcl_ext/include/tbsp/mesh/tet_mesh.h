@@ -43,6 +43,12 @@ Eigen::MatrixX3i tet_boundary_faces(const Eigen::Matrix<int, Eigen::Dynamic, 4>&
 /// stay in V, unreferenced), so vertex i of the surface is vertex i of the tet mesh.
 TriMesh tet_boundary_mesh(const TetMesh& mesh);
 
+/// \brief The boundary surface with only the vertices it uses, positions taken from X (#V by 3,
+/// e.g. deformed positions of the tet mesh). \param[out] vertex_map optional: for each tet-mesh
+/// vertex its index in the surface, or −1 (interior).
+TriMesh tet_boundary_surface(const Eigen::MatrixX3d& X, const Eigen::Matrix<int, Eigen::Dynamic, 4>& T,
+                             std::vector<int>* vertex_map = nullptr);
+
 /// \brief Tetrahedra sharing a face with each tetrahedron: #T by 4, entry k is the neighbour
 /// across the face opposite vertex k, or −1 on the boundary. O(#T log #T).
 Eigen::Matrix<int, Eigen::Dynamic, 4> tet_face_neighbours(const Eigen::Matrix<int, Eigen::Dynamic, 4>& T);
