@@ -522,10 +522,12 @@ void TetDeformer::buildOperators() {
 
 void TetDeformer::buildRotationInterpolation() {
   // Step (III) interpolates over the vertices with the same operator L and the same
-  // eliminated (constrained) vertices as step (I), so it re-uses that factorization: one more
-  // back-substitution (4 right-hand sides) per iteration, no second factorization. Region-handle
+  // eliminated (constrained) vertices as step (I), so it re-uses that factorization. Region-handle
   // vertices carry their handle's rotation increment; other constrained vertices (vertex and
-  // point handles) carry none. A tet's increment is the normalized mean of its vertices'.
+  // point handles) carry none (the identity). A tet's increment is the normalized mean of its
+  // vertices'. The interpolation is linear in the handles' quaternions, so it is precomputed
+  // here as one harmonic weight per handle (one solve with #regions + 1 right-hand sides); each
+  // iteration then only blends the handles' current increments with the per-tet weights.
   const auto t0 = Clock::now();
   int regions = 0;
   for (const auto& h : handles_) regions += h.kind == Handle::Region;
@@ -539,6 +541,30 @@ void TetDeformer::buildRotationInterpolation() {
     const int h = owner[std::size_t(mesh_.T(j, 0))];
     if (h >= 0 && owner[std::size_t(mesh_.T(j, 1))] == h && owner[std::size_t(mesh_.T(j, 2))] == h && owner[std::size_t(mesh_.T(j, 3))] == h)
       ++report_.rotation_handle_tets;
+  }
+  rot_groups_.clear();
+  rot_tet_weights_.resize(0, 0);
+  if (rotint_active_) {
+    for (std::size_t hi = 0; hi < handles_.size(); ++hi)
+      if (handles_[hi].kind == Handle::Region) rot_groups_.push_back(int(hi));
+    const Eigen::Index G = Eigen::Index(rot_groups_.size()) + 1;  // + the identity group
+    std::vector<int> group_of(handles_.size(), int(G) - 1);
+    for (std::size_t g = 0; g < rot_groups_.size(); ++g) group_of[std::size_t(rot_groups_[g])] = int(g);
+    const Eigen::Index nc = Eigen::Index(constrained_vertices_.size());
+    Eigen::MatrixXd Wc = Eigen::MatrixXd::Zero(nc, G);
+    for (Eigen::Index i = 0; i < nc; ++i) {
+      const int h = constraint_handle_[std::size_t(i)];
+      Wc(i, h >= 0 ? group_of[std::size_t(h)] : G - 1) = 1.0;
+    }
+    const Eigen::MatrixXd Wf = solver_->chol.solve(-(solver_->Lfc * Wc));
+    rot_tet_weights_.resize(mesh_.T.rows(), G);
+    for (Eigen::Index j = 0; j < mesh_.T.rows(); ++j) {
+      rot_tet_weights_.row(j).setZero();
+      for (int k = 0; k < 4; ++k) {
+        const int v = mesh_.T(j, k), f = free_index_[std::size_t(v)];
+        rot_tet_weights_.row(j) += 0.25 * (f >= 0 ? Eigen::RowVectorXd(Wf.row(f)) : Eigen::RowVectorXd(Wc.row(constrained_index_[std::size_t(v)])));
+      }
+    }
   }
   report_.t_factorize_rotint = seconds_since(t0);
 }
@@ -585,22 +611,16 @@ double TetDeformer::iterate() {
         any = any || q.vec().norm() > 1e-15;
       }
     if (any) {
-      const Eigen::Index nc = Eigen::Index(constrained_vertices_.size());
-      Eigen::MatrixXd Qc(nc, 4);
-      for (Eigen::Index i = 0; i < nc; ++i) {
-        const int h = constraint_handle_[std::size_t(i)];
-        const Eigen::Quaterniond& q = h >= 0 ? dq[std::size_t(h)] : Eigen::Quaterniond::Identity();
-        Qc.row(i) << q.w(), q.x(), q.y(), q.z();
+      const Eigen::Index G = Eigen::Index(rot_groups_.size()) + 1;
+      Eigen::Matrix<double, Eigen::Dynamic, 4> Q(G, 4);  // the groups' increments (w, x, y, z)
+      for (Eigen::Index g = 0; g + 1 < G; ++g) {
+        const Eigen::Quaterniond& q = dq[std::size_t(rot_groups_[std::size_t(g)])];
+        Q.row(g) << q.w(), q.x(), q.y(), q.z();
       }
-      const Eigen::MatrixXd Qf = solver_->chol.solve(-(solver_->Lfc * Qc));
-      auto vertex_q = [&](int v) -> Eigen::Vector4d {
-        const int f = free_index_[std::size_t(v)];
-        return f >= 0 ? Eigen::Vector4d(Qf.row(f).transpose()) : Eigen::Vector4d(Qc.row(constrained_index_[std::size_t(v)]).transpose());
-      };
+      Q.row(G - 1) << 1, 0, 0, 0;
 #pragma omp parallel for schedule(static) if (m > 2000)
       for (Eigen::Index j = 0; j < m; ++j) {
-        Eigen::Vector4d q = Eigen::Vector4d::Zero();
-        for (int k = 0; k < 4; ++k) q += vertex_q(mesh_.T(j, k));
+        Eigen::Vector4d q = (rot_tet_weights_.row(j) * Q).transpose();
         const double nq = q.norm();
         if (!(nq > 1e-12)) continue;
         q /= nq;

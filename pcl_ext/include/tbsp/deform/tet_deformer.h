@@ -17,8 +17,10 @@
 ///         increments since the previous iteration (relative rotations, at most
 ///         max_handle_step) are interpolated harmonically as unit quaternions over the
 ///         vertices — with L and the eliminated vertices of step (I), so the same factorization
-///         serves (one more back-substitution); other handles' vertices carry no increment —
-///         and each tet's R_j is turned by the normalized mean of its vertices' increments.
+///         serves; the interpolation is linear in the handles' quaternions, so one harmonic
+///         weight per region handle is precomputed and an iteration only blends — other handles'
+///         vertices carry no increment — and each tet's R_j is turned by the normalized mean of
+///         its vertices' increments.
 ///         Being relative and incremental, handles that turn by more than 180° in total are
 ///         fine. Done before the solve so that it already sees the handles' new orientation;
 ///   (IV)  rigid regions: every tet of a region gets the volume-weighted mean rotation;
@@ -216,6 +218,8 @@ private:
   Eigen::MatrixX3d Xc_;
   // rotation interpolation
   bool rotint_active_ = false;
+  std::vector<int> rot_groups_;               // region handles, in weight-column order
+  Eigen::MatrixXd rot_tet_weights_;           // #tets x (#regions + 1): harmonic weights (last: identity)
 
   // state
   Eigen::MatrixX3d X_;
