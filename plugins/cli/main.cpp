@@ -366,7 +366,7 @@ int main(int argc, char** argv) {
   std::string g_shape = "icosphere", g_out;
   int g_level = 3, g_rings = 60, g_segments = 24;
   auto* generate = app.add_subcommand("generate", "write a procedural mesh (icosphere, grid, tube, bumpy-bar)");
-  generate->add_option("shape", g_shape, "icosphere | grid | tube | bumpy-bar")->required();
+  generate->add_option("shape", g_shape, "icosphere | grid | tube | bumpy-bar | box (closed 1 x 0.2 x 0.2 bar)")->required();
   generate->add_option("--out", g_out, "output mesh")->required();
   generate->add_option("--level", g_level, "icosphere subdivision level / grid cells = 2^level");
   generate->add_option("--rings", g_rings, "tube rings");
@@ -432,6 +432,7 @@ int main(int argc, char** argv) {
       if (g_shape == "icosphere") m = tbsp::make_icosphere(g_level);
       else if (g_shape == "grid") m = tbsp::make_grid(1 << g_level, 1 << g_level);
       else if (g_shape == "tube") m = tbsp::make_tube(g_rings, g_segments);
+      else if (g_shape == "box") m = tbsp::make_box(5 << g_level, 1 << g_level, 1 << g_level, 1.0, 0.2, 0.2);
       else if (g_shape == "bumpy-bar") {
         // tube with a helical ridge pattern, so that shearing and twisting are visible
         m = tbsp::make_tube(g_rings, g_segments, 1.0, 0.1);
@@ -442,7 +443,7 @@ int main(int argc, char** argv) {
           m.V(i, 2) *= r;
         }
       } else {
-        throw tbsp::InvalidInput("unknown shape '" + g_shape + "' (icosphere, grid, tube, bumpy-bar)");
+        throw tbsp::InvalidInput("unknown shape '" + g_shape + "' (icosphere, grid, tube, bumpy-bar, box)");
       }
       tbsp::write_mesh(g_out, m);
       return 0;
