@@ -1,0 +1,630 @@
+#include "tbsp/fitting/inverse_texture_mapping.h"
+
+#include <Eigen/Dense>
+#include <nanoflann.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <string>
+
+#include "tbsp/core/error.h"
+#include "tbsp/core/logging.h"
+#include "tbsp/mesh/heat_geodesics.h"
+#include "tbsp/mesh/mesh_validation.h"
+#include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/solve/sparse_cholesky.h"
+
+namespace tbsp {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+const double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+std::string px(const Eigen::Vector2d& p) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "(%.1f, %.1f)", p.x(), p.y());
+  return buf;
+}
+
+/// A regular grid of nodes over the image, some of them active (inside the mask).
+struct Grid {
+  int w = 0, h = 0;          // nodes
+  double sx = 1, sy = 1;     // pixels between nodes
+  std::vector<int> index;    // w*h -> active id or -1
+  std::vector<int> node_x, node_y;  // per active node: grid coordinates
+
+  int at(int i, int j) const { return (i < 0 || j < 0 || i >= w || j >= h) ? -1 : index[static_cast<std::size_t>(j) * w + i]; }
+  long active() const { return static_cast<long>(node_x.size()); }
+  Eigen::Vector2d pixel(int a) const { return {node_x[a] * sx, node_y[a] * sy}; }
+  bool cellActive(int i, int j) const { return at(i, j) >= 0 && at(i + 1, j) >= 0 && at(i, j + 1) >= 0 && at(i + 1, j + 1) >= 0; }
+
+  /// Keeps only nodes that belong to at least one active cell, then numbers them.
+  void finalize(const std::vector<char>& on) {
+    index.assign(static_cast<std::size_t>(w) * h, -1);
+    auto is_on = [&](int i, int j) { return i >= 0 && j >= 0 && i < w && j < h && on[static_cast<std::size_t>(j) * w + i]; };
+    node_x.clear();
+    node_y.clear();
+    for (int j = 0; j < h; ++j)
+      for (int i = 0; i < w; ++i) {
+        if (!is_on(i, j)) continue;
+        bool in_cell = false;
+        for (int di = -1; di <= 0 && !in_cell; ++di)
+          for (int dj = -1; dj <= 0 && !in_cell; ++dj)
+            in_cell = is_on(i + di, j + dj) && is_on(i + di + 1, j + dj) && is_on(i + di, j + dj + 1) && is_on(i + di + 1, j + dj + 1);
+        if (!in_cell) continue;
+        index[static_cast<std::size_t>(j) * w + i] = static_cast<int>(node_x.size());
+        node_x.push_back(i);
+        node_y.push_back(j);
+      }
+  }
+
+  /// Bilinear weights of a pixel position over the active nodes; false if the pixel is outside
+  /// the active region. Falls back to the nearest active corner when the cell is partly active.
+  bool weights(const Eigen::Vector2d& p, std::vector<std::pair<int, double>>& out) const {
+    out.clear();
+    const double u = p.x() / sx, v = p.y() / sy;
+    if (!(u >= -1e-9 && v >= -1e-9 && u <= w - 1 + 1e-9 && v <= h - 1 + 1e-9)) return false;
+    const int i = std::clamp(static_cast<int>(std::floor(u)), 0, w - 2), j = std::clamp(static_cast<int>(std::floor(v)), 0, h - 2);
+    const double fu = std::clamp(u - i, 0.0, 1.0), fv = std::clamp(v - j, 0.0, 1.0);
+    if (cellActive(i, j)) {
+      const double wt[4] = {(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv};
+      const int id[4] = {at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)};
+      for (int c = 0; c < 4; ++c)
+        if (wt[c] > 0) out.emplace_back(id[c], wt[c]);
+      return true;
+    }
+    const int ci = fu < 0.5 ? i : i + 1, cj = fv < 0.5 ? j : j + 1;
+    if (at(ci, cj) < 0) return false;
+    out.emplace_back(at(ci, cj), 1.0);
+    return true;
+  }
+
+  Eigen::MatrixX3i faces() const {
+    std::vector<Eigen::Vector3i> f;
+    for (int j = 0; j + 1 < h; ++j)
+      for (int i = 0; i + 1 < w; ++i)
+        if (cellActive(i, j)) {
+          const int a = at(i, j), b = at(i + 1, j), c = at(i + 1, j + 1), d = at(i, j + 1);
+          f.emplace_back(a, c, b);
+          f.emplace_back(a, d, c);
+        }
+    Eigen::MatrixX3i F(f.size(), 3);
+    for (std::size_t r = 0; r < f.size(); ++r) F.row(r) = f[r].transpose();
+    return F;
+  }
+};
+
+/// Lower-triangle accumulation of Σ_rows (row)ᵀ(row) for the normal equations.
+struct NormalEquations {
+  long n;
+  std::vector<Eigen::Triplet<double>> trip;
+  Eigen::MatrixX3d rhs;
+  explicit NormalEquations(long n_) : n(n_), rhs(Eigen::MatrixX3d::Zero(n_, 3)) {}
+  void addRow(const std::pair<int, double>* e, int m, double weight2, const Eigen::Vector3d& target = Eigen::Vector3d::Zero()) {
+    for (int a = 0; a < m; ++a) {
+      for (int b = 0; b < m; ++b)
+        if (e[b].first <= e[a].first) trip.emplace_back(e[a].first, e[b].first, weight2 * e[a].second * e[b].second);
+      rhs.row(e[a].first) += weight2 * e[a].second * target.transpose();
+    }
+  }
+  Eigen::SparseMatrix<double> matrix() const {
+    Eigen::SparseMatrix<double> A(n, n);
+    A.setFromTriplets(trip.begin(), trip.end());
+    return A;
+  }
+};
+
+/// Thin-plate (+ a vanishing membrane term for definiteness) rows of the grid.
+void add_thin_plate(const Grid& g, NormalEquations& ne) {
+  const double area = g.sx * g.sy;
+  const double wxx = area / std::pow(g.sx, 4), wyy = area / std::pow(g.sy, 4), wxy = 2.0 * area / (area * area);
+  const double wmem = 1e-12 * (wxx + wyy);
+  for (int j = 0; j < g.h; ++j)
+    for (int i = 0; i < g.w; ++i) {
+      const int c = g.at(i, j);
+      if (c < 0) continue;
+      const int l = g.at(i - 1, j), r = g.at(i + 1, j), u = g.at(i, j - 1), d = g.at(i, j + 1);
+      if (l >= 0 && r >= 0) {
+        const std::pair<int, double> e[3] = {{l, 1.0}, {c, -2.0}, {r, 1.0}};
+        ne.addRow(e, 3, wxx);
+      }
+      if (u >= 0 && d >= 0) {
+        const std::pair<int, double> e[3] = {{u, 1.0}, {c, -2.0}, {d, 1.0}};
+        ne.addRow(e, 3, wyy);
+      }
+      if (g.cellActive(i, j)) {
+        const std::pair<int, double> e[4] = {{c, 1.0}, {r, -1.0}, {d, -1.0}, {g.at(i + 1, j + 1), 1.0}};
+        ne.addRow(e, 4, wxy);
+      }
+      if (r >= 0) {
+        const std::pair<int, double> e[2] = {{c, 1.0}, {r, -1.0}};
+        ne.addRow(e, 2, wmem);
+      }
+      if (d >= 0) {
+        const std::pair<int, double> e[2] = {{c, 1.0}, {d, -1.0}};
+        ne.addRow(e, 2, wmem);
+      }
+    }
+}
+
+/// RMS of the second differences of X over the grid divided by the mean edge length.
+double roughness(const Grid& g, const Eigen::MatrixX3d& X) {
+  double s2 = 0, len = 0;
+  long n2 = 0, nl = 0;
+  for (int j = 0; j < g.h; ++j)
+    for (int i = 0; i < g.w; ++i) {
+      const int c = g.at(i, j);
+      if (c < 0) continue;
+      const int l = g.at(i - 1, j), r = g.at(i + 1, j), u = g.at(i, j - 1), d = g.at(i, j + 1);
+      if (l >= 0 && r >= 0) { s2 += (X.row(l) - 2 * X.row(c) + X.row(r)).squaredNorm(); ++n2; }
+      if (u >= 0 && d >= 0) { s2 += (X.row(u) - 2 * X.row(c) + X.row(d)).squaredNorm(); ++n2; }
+      if (r >= 0) { len += (X.row(r) - X.row(c)).norm(); ++nl; }
+      if (d >= 0) { len += (X.row(d) - X.row(c)).norm(); ++nl; }
+    }
+  if (n2 == 0 || nl == 0 || !(len > 0)) return 0;
+  return std::sqrt(s2 / n2) / (len / nl);
+}
+
+Eigen::MatrixX3d solve(const NormalEquations& ne, SparseCholesky& chol, const std::string& stage) {
+  try {
+    chol.compute(ne.matrix());
+  } catch (const NumericalFailure& e) {
+    throw InvalidInput("[InverseTextureMapping] " + stage + ": the system is singular (" + e.what() +
+                       "); every pattern piece needs at least 3 constraints that are not on one line");
+  }
+  return chol.solve(ne.rhs);
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(p * (v.size() - 1) + 0.5));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+using KdMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using KdTree = nanoflann::KDTreeEigenMatrixAdaptor<KdMatrix, -1, nanoflann::metric_L2_Simple, true>;
+
+}  // namespace
+
+TextureMappingResult InverseTextureMapping::compute() const {
+  const auto t_start = Clock::now();
+  const InverseTextureMappingOptions& o = options_;
+  const std::string who = "[InverseTextureMapping]";
+  // ---------------------------------------------------------------- validation
+  if (width_ < 2 || height_ < 2)
+    throw InvalidInput(who + " image size " + std::to_string(width_) + "x" + std::to_string(height_) + " is too small: call setImageSize() with at least 2x2 pixels");
+  if (!mask_.empty() && mask_.size() != static_cast<std::size_t>(width_) * height_)
+    throw InvalidInput(who + " the mask has " + std::to_string(mask_.size()) + " entries but the image has " +
+                       std::to_string(static_cast<long>(width_) * height_) + " pixels; give a mask of the image's size");
+  MeshRequirements req;
+  req.allow_nonmanifold = false;
+  req.allow_boundary = true;
+  require_valid_mesh(mesh_, req, "InverseTextureMapping");
+  const int k = static_cast<int>(constraints_.size());
+  if (k < 3) throw InvalidInput(who + " " + std::to_string(k) + " constraint(s) given; at least 3 (not on one line) are needed to place the image");
+  if (!(o.omega > 0) || !(o.sigma >= 0) || !(o.epsilon_factor > 0) || !(o.ratio_low > 0) || !(o.ratio_high > o.ratio_low) ||
+      o.max_solve_nodes < 16 || o.max_geodesic_nodes < 16 || !(o.heat_time_factor > 0) || !std::isfinite(o.normal_offset))
+    throw InvalidInput(who + " invalid options: need omega > 0, sigma >= 0, epsilon_factor > 0, 0 < ratio_low < ratio_high, "
+                             "max_solve_nodes and max_geodesic_nodes >= 16, heat_time_factor > 0, finite normal_offset");
+  const Eigen::MatrixX3d& V = mesh_.V;
+  const Eigen::MatrixX3i& F = mesh_.F;
+  const long nv = V.rows();
+  for (int c = 0; c < k; ++c) {
+    const TextureConstraint& tc = constraints_[c];
+    const std::string name = who + " constraint " + std::to_string(c) + " (pixel " + px(tc.pixel) + ")";
+    if (!tc.pixel.allFinite() || tc.pixel.x() < 0 || tc.pixel.y() < 0 || tc.pixel.x() > width_ - 1 || tc.pixel.y() > height_ - 1)
+      throw InvalidInput(name + ": the pixel is outside the " + std::to_string(width_) + "x" + std::to_string(height_) +
+                         " image; pixel coordinates run from 0 to width-1 / height-1");
+    if (!mask_.empty()) {
+      const int xi = static_cast<int>(std::lround(tc.pixel.x())), yi = static_cast<int>(std::lround(tc.pixel.y()));
+      if (!mask_[static_cast<std::size_t>(yi) * width_ + xi]) throw InvalidInput(name + ": the pixel is outside the mask; put pattern constraints on pattern pixels");
+    }
+    if (tc.vertex >= 0) {
+      if (tc.vertex >= nv) throw InvalidInput(name + ": vertex " + std::to_string(tc.vertex) + " does not exist (the mesh has " + std::to_string(nv) + " vertices)");
+    } else {
+      if (tc.face < 0 || tc.face >= F.rows())
+        throw InvalidInput(name + ": needs a vertex index or a face index; face " + std::to_string(tc.face) + " does not exist (the mesh has " + std::to_string(F.rows()) + " faces)");
+      if (!tc.barycentric.allFinite() || tc.barycentric.minCoeff() < -1e-6 || std::abs(tc.barycentric.sum() - 1) > 1e-6)
+        throw InvalidInput(name + ": barycentric coordinates must be >= 0 and sum to 1");
+    }
+    for (int c2 = 0; c2 < c; ++c2)
+      if ((constraints_[c2].pixel - tc.pixel).norm() < 0.5)
+        throw InvalidInput(name + ": the same pixel as constraint " + std::to_string(c2) + "; one pixel cannot go to two places");
+  }
+  report_progress(o.progress, 0.0, "texture: setup");
+
+  TextureMappingResult res;
+  TextureMappingReport& rep = res.report;
+  rep.constraints = k;
+  rep.mesh_vertices = nv;
+  rep.pixels = static_cast<long>(width_) * height_;
+  const double diag = bbox_diagonal(V);
+
+  // Constraint targets (with the draping offset along the normals).
+  const Eigen::MatrixX3d VN = vertex_normals(V, F);
+  std::vector<Eigen::Vector3d> target(k);
+  std::vector<WeightedSource> mesh_src(k);
+  for (int c = 0; c < k; ++c) {
+    const TextureConstraint& tc = constraints_[c];
+    if (tc.vertex >= 0) {
+      target[c] = V.row(tc.vertex).transpose() + o.normal_offset * VN.row(tc.vertex).transpose();
+      mesh_src[c] = {{tc.vertex, 1.0}};
+    } else {
+      Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero();
+      for (int a = 0; a < 3; ++a) {
+        p += tc.barycentric(a) * V.row(F(tc.face, a)).transpose();
+        n += tc.barycentric(a) * VN.row(F(tc.face, a)).transpose();
+        mesh_src[c].emplace_back(F(tc.face, a), tc.barycentric(a));
+      }
+      target[c] = p + o.normal_offset * n.normalized();
+    }
+  }
+
+  // ---------------------------------------------------------------- solve grid
+  Grid g;
+  {
+    const double s = std::max(1.0, std::sqrt(static_cast<double>(width_) * height_ / static_cast<double>(o.max_solve_nodes)));
+    g.w = std::max(2, static_cast<int>(std::lround((width_ - 1) / s)) + 1);
+    g.h = std::max(2, static_cast<int>(std::lround((height_ - 1) / s)) + 1);
+    g.sx = (width_ - 1.0) / (g.w - 1);
+    g.sy = (height_ - 1.0) / (g.h - 1);
+    std::vector<char> on(static_cast<std::size_t>(g.w) * g.h, 1);
+    if (!mask_.empty())
+      for (int j = 0; j < g.h; ++j)
+        for (int i = 0; i < g.w; ++i) {
+          const long xi = std::lround(i * g.sx), yi = std::lround(j * g.sy);
+          on[static_cast<std::size_t>(j) * g.w + i] = mask_[static_cast<std::size_t>(yi) * width_ + xi] != 0;
+        }
+    g.finalize(on);
+  }
+  if (g.active() == 0) throw InvalidInput(who + " the mask leaves no pattern region of at least 2x2 grid nodes; check the mask image");
+  rep.grid_nodes = g.active();
+  rep.pixels_per_node = std::sqrt(g.sx * g.sy);
+  res.grid_width = g.w;
+  res.grid_height = g.h;
+  res.node_spacing_x = g.sx;
+  res.node_spacing_y = g.sy;
+  res.node_index = g.index;
+  res.node_pixel.resize(g.active(), 2);
+  for (long a = 0; a < g.active(); ++a) res.node_pixel.row(a) = g.pixel(static_cast<int>(a)).transpose();
+
+  std::vector<std::vector<std::pair<int, double>>> cw(k);
+  for (int c = 0; c < k; ++c)
+    if (!g.weights(constraints_[c].pixel, cw[c]))
+      throw InvalidInput(who + " constraint " + std::to_string(c) + " (pixel " + px(constraints_[c].pixel) + ") is not inside a pattern region of the mask (too thin there); move it inwards");
+
+  // Every connected pattern piece needs 3 constraints not on one line.
+  {
+    std::vector<int> comp(g.active(), -1);
+    int nc = 0;
+    for (long s0 = 0; s0 < g.active(); ++s0) {
+      if (comp[s0] >= 0) continue;
+      std::vector<int> stack{static_cast<int>(s0)};
+      comp[s0] = nc;
+      while (!stack.empty()) {
+        const int a = stack.back();
+        stack.pop_back();
+        const int i = g.node_x[a], j = g.node_y[a];
+        const int nb[4] = {g.at(i - 1, j), g.at(i + 1, j), g.at(i, j - 1), g.at(i, j + 1)};
+        for (int b : nb)
+          if (b >= 0 && comp[b] < 0) {
+            comp[b] = nc;
+            stack.push_back(b);
+          }
+      }
+      ++nc;
+    }
+    std::vector<std::vector<Eigen::Vector2d>> pts(nc);
+    for (int c = 0; c < k; ++c) pts[comp[cw[c].front().first]].push_back(constraints_[c].pixel);
+    for (int p = 0; p < nc; ++p) {
+      bool ok = pts[p].size() >= 3;
+      if (ok) {
+        Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+        for (const auto& q : pts[p]) mean += q;
+        mean /= pts[p].size();
+        Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+        for (const auto& q : pts[p]) cov += (q - mean) * (q - mean).transpose();
+        ok = Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov / pts[p].size()).eigenvalues()(0) > 1.0;
+      }
+      if (!ok) {
+        const Eigen::Vector2d where = g.pixel(static_cast<int>(std::find(comp.begin(), comp.end(), p) - comp.begin()));
+        throw InvalidInput(who + " the pattern piece containing pixel " + px(where) + " has " + std::to_string(pts[p].size()) +
+                           " constraint(s)" + (pts[p].size() >= 3 ? " on one line" : "") +
+                           "; each piece needs at least 3 constraints not on one line (or remove the piece from the mask)");
+      }
+    }
+  }
+
+  // ---------------------------------------------------------------- deform 1
+  auto t0 = Clock::now();
+  NormalEquations base(g.active());
+  add_thin_plate(g, base);
+  SparseCholesky chol;
+  {
+    NormalEquations ne = base;
+    for (int c = 0; c < k; ++c) ne.addRow(cw[c].data(), static_cast<int>(cw[c].size()), o.omega * o.omega, target[c]);
+    res.initial_surface = solve(ne, chol, "deform 1");
+  }
+  rep.t_deform1 = seconds_since(t0);
+  report_progress(o.progress, 0.2, "texture: mesh geodesics");
+
+  // ---------------------------------------------------------------- mesh geodesics
+  t0 = Clock::now();
+  HeatGeodesicsOptions hopt;
+  hopt.time_factor = o.heat_time_factor;
+  const Eigen::MatrixXd FT = HeatGeodesics(V, F, hopt).distances(mesh_src);
+  rep.t_mesh_geodesics = seconds_since(t0);
+  report_progress(o.progress, 0.4, "texture: texture geodesics");
+
+  // ---------------------------------------------------------------- texture geodesics
+  t0 = Clock::now();
+  Grid gg;  // geodesic grid: every step-th solve node
+  int step = 1;
+  while (g.active() / (static_cast<double>(step) * step) > o.max_geodesic_nodes) ++step;
+  {
+    gg.w = (g.w - 1) / step + 1;
+    gg.h = (g.h - 1) / step + 1;
+    gg.sx = g.sx * step;
+    gg.sy = g.sy * step;
+    std::vector<char> on(static_cast<std::size_t>(gg.w) * gg.h, 0);
+    for (int j = 0; j < gg.h; ++j)
+      for (int i = 0; i < gg.w; ++i) on[static_cast<std::size_t>(j) * gg.w + i] = g.at(i * step, j * step) >= 0;
+    gg.finalize(on);
+  }
+  rep.geodesic_nodes = gg.active();
+  if (gg.active() == 0) throw InvalidInput(who + " the pattern is too thin for the geodesic grid; raise max_geodesic_nodes");
+  Eigen::MatrixX3d GX(gg.active(), 3);
+  for (long a = 0; a < gg.active(); ++a) GX.row(a) = res.initial_surface.row(g.at(gg.node_x[a] * step, gg.node_y[a] * step));
+  std::vector<std::vector<std::pair<int, double>>> gw(k);
+  for (int c = 0; c < k; ++c)
+    if (!gg.weights(constraints_[c].pixel, gw[c]))
+      throw InvalidInput(who + " constraint " + std::to_string(c) + " (pixel " + px(constraints_[c].pixel) + ") falls outside the coarser geodesic grid; raise max_geodesic_nodes");
+  Eigen::MatrixXd FS(gg.active(), k);
+  if (o.match_distance == MatchDistance::DeformedSurface) {
+    FS = HeatGeodesics(GX, gg.faces(), hopt).distances(gw);
+  } else {
+    // Flat-image distances scaled by the mean size of a pixel on the deformed surface.
+    double len3 = 0, lenp = 0;
+    for (long a = 0; a < g.active(); ++a) {
+      const int i = g.node_x[a], j = g.node_y[a];
+      if (g.at(i + 1, j) >= 0) { len3 += (res.initial_surface.row(g.at(i + 1, j)) - res.initial_surface.row(a)).norm(); lenp += g.sx; }
+      if (g.at(i, j + 1) >= 0) { len3 += (res.initial_surface.row(g.at(i, j + 1)) - res.initial_surface.row(a)).norm(); lenp += g.sy; }
+    }
+    const double scale = lenp > 0 ? len3 / lenp : 1.0;
+    for (long a = 0; a < gg.active(); ++a)
+      for (int c = 0; c < k; ++c) FS(a, c) = scale * (gg.pixel(static_cast<int>(a)) - constraints_[c].pixel).norm();
+  }
+  rep.t_texture_geodesics = seconds_since(t0);
+  report_progress(o.progress, 0.6, "texture: matching");
+
+  // ---------------------------------------------------------------- matching
+  t0 = Clock::now();
+  // Distance vectors at the constraints themselves (for the ratio test).
+  auto FT_at = [&](int c, int ch) {
+    double s = 0;
+    for (const auto& [v, w] : mesh_src[c]) s += w * FT(v, ch);
+    return s;
+  };
+  auto FS_at = [&](int c, int ch) {
+    double s = 0;
+    for (const auto& [a, w] : gw[c]) s += w * FS(a, ch);
+    return s;
+  };
+  std::vector<std::vector<char>> keep(k, std::vector<char>(k, 1));  // keep[a][b]: channel b near constraint a
+  if (o.mismatch_detection) {
+    const double tiny = 1e-9 * diag;
+    for (int a = 0; a < k; ++a)
+      for (int b = 0; b < k; ++b) {
+        if (a == b) continue;
+        const double dt = FT_at(a, b), ds = FS_at(a, b);
+        if (!(dt > tiny) || !(ds > tiny) || !std::isfinite(dt)) continue;
+        const double ratio = dt / ds;
+        if (ratio < o.ratio_low || ratio > o.ratio_high) {
+          keep[a][b] = 0;
+          ++rep.dropped_channels;
+        }
+      }
+  }
+  auto nearest_constraint = [k](const Eigen::MatrixXd& D, Eigen::Index row) {
+    int best = 0;
+    for (int c = 1; c < k; ++c)
+      if (D(row, c) < D(row, best)) best = c;
+    return best;
+  };
+
+  res.status.assign(nv, TextureVertexStatus::Unmatched);
+  res.uv = Eigen::MatrixX2d::Constant(nv, 2, kNaN);
+  for (int c = 0; c < k; ++c)
+    if (constraints_[c].vertex >= 0) {
+      res.status[constraints_[c].vertex] = TextureVertexStatus::Constraint;
+      res.uv.row(constraints_[c].vertex) = constraints_[c].pixel.transpose();
+    }
+  // Group the free vertices by the channel set they use (nearest constraint's keep row).
+  std::map<std::vector<char>, std::vector<long>> groups;
+  for (long v = 0; v < nv; ++v) {
+    if (res.status[v] == TextureVertexStatus::Constraint) continue;
+    if (!FT.row(v).allFinite()) continue;  // another component than some constraint
+    groups[keep[nearest_constraint(FT, v)]].push_back(v);
+  }
+  // Grid-node channel masks: nodes use the channels of their own nearest constraint.
+  std::vector<int> node_cell(gg.active());
+  for (long a = 0; a < gg.active(); ++a) node_cell[a] = nearest_constraint(FS, a);
+  for (const auto& [mask, verts] : groups) {
+    std::vector<int> ch;
+    for (int c = 0; c < k; ++c)
+      if (mask[c]) ch.push_back(c);
+    const int kd = static_cast<int>(ch.size());
+    if (kd == 0) continue;
+    // Nodes whose own channel set disagrees with this one still take part: the dropped channels
+    // are simply ignored for this group (a node's mask only matters for its own cell).
+    KdMatrix P(gg.active(), kd);
+    for (long a = 0; a < gg.active(); ++a)
+      for (int t = 0; t < kd; ++t) P(a, t) = FS(a, ch[t]);
+    KdTree tree(kd, std::cref(P), 16);
+    const double eps = o.epsilon_factor * diag * k;
+    rep.epsilon = eps;
+    const double eps_group = o.epsilon_factor * diag * kd;
+#pragma omp parallel for schedule(dynamic, 256)
+    for (long q = 0; q < static_cast<long>(verts.size()); ++q) {
+      const long v = verts[q];
+      std::vector<double> f(kd);
+      for (int t = 0; t < kd; ++t) f[t] = FT(v, ch[t]);
+      Eigen::Index idx = 0;
+      double d2 = 0;
+      nanoflann::KNNResultSet<double, Eigen::Index> rs(1);
+      rs.init(&idx, &d2);
+      tree.index->findNeighbors(rs, f.data(), nanoflann::SearchParams());
+      if (!(std::sqrt(d2) < eps_group)) continue;
+      // Sub-node refinement: Gauss-Newton on the bilinear field around the node.
+      double u = gg.node_x[idx], w = gg.node_y[idx];
+      const double u0 = u, w0 = w;
+      for (int it = 0; it < 4; ++it) {
+        int i = std::clamp(static_cast<int>(std::floor(u)), 0, gg.w - 2), j = std::clamp(static_cast<int>(std::floor(w)), 0, gg.h - 2);
+        if (!gg.cellActive(i, j)) break;
+        const double fu = u - i, fw = w - j;
+        const int n00 = gg.at(i, j), n10 = gg.at(i + 1, j), n01 = gg.at(i, j + 1), n11 = gg.at(i + 1, j + 1);
+        Eigen::Matrix2d JtJ = Eigen::Matrix2d::Zero();
+        Eigen::Vector2d Jtr = Eigen::Vector2d::Zero();
+        for (int t = 0; t < kd; ++t) {
+          const int c = ch[t];
+          const double a00 = FS(n00, c), a10 = FS(n10, c), a01 = FS(n01, c), a11 = FS(n11, c);
+          const double val = (1 - fu) * (1 - fw) * a00 + fu * (1 - fw) * a10 + (1 - fu) * fw * a01 + fu * fw * a11;
+          const Eigen::Vector2d J((1 - fw) * (a10 - a00) + fw * (a11 - a01), (1 - fu) * (a01 - a00) + fu * (a11 - a10));
+          JtJ += J * J.transpose();
+          Jtr += J * (f[t] - val);
+        }
+        JtJ.diagonal().array() += 1e-12 + 1e-6 * JtJ.trace();
+        const Eigen::Vector2d delta = JtJ.ldlt().solve(Jtr);
+        if (!delta.allFinite()) break;
+        u = std::clamp(u + delta.x(), std::max(0.0, u0 - 1), std::min(gg.w - 1.0, u0 + 1));
+        w = std::clamp(w + delta.y(), std::max(0.0, w0 - 1), std::min(gg.h - 1.0, w0 + 1));
+        if (delta.norm() < 1e-3) break;
+      }
+      res.uv(v, 0) = u * gg.sx;
+      res.uv(v, 1) = w * gg.sy;
+      res.status[v] = TextureVertexStatus::Matched;
+    }
+  }
+  if (rep.epsilon == 0) rep.epsilon = o.epsilon_factor * diag * k;
+  for (long v = 0; v < nv; ++v) {
+    if (res.status[v] == TextureVertexStatus::Matched) ++rep.matched;
+    if (res.status[v] == TextureVertexStatus::Unmatched) ++rep.unmatched;
+  }
+  rep.matched_fraction = nv > 0 ? 1.0 - static_cast<double>(rep.unmatched) / nv : 0.0;
+  rep.t_matching = seconds_since(t0);
+  report_progress(o.progress, 0.7, "texture: deform 2");
+
+  // ---------------------------------------------------------------- deform 2 (eq. 4.3)
+  t0 = Clock::now();
+  if (o.sigma > 0) {
+    NormalEquations ne = base;
+    for (int c = 0; c < k; ++c) ne.addRow(cw[c].data(), static_cast<int>(cw[c].size()), o.omega * o.omega, target[c]);
+    std::vector<std::pair<int, double>> wts;
+    for (long v = 0; v < nv; ++v) {
+      if (res.status[v] != TextureVertexStatus::Matched) continue;
+      if (!g.weights(res.uv.row(v).transpose(), wts)) continue;
+      const Eigen::Vector3d q = V.row(v).transpose() + o.normal_offset * VN.row(v).transpose();
+      ne.addRow(wts.data(), static_cast<int>(wts.size()), o.sigma * o.sigma, q);
+    }
+    res.surface = solve(ne, chol, "deform 2");
+  } else {
+    res.surface = res.initial_surface;
+  }
+  rep.t_deform2 = seconds_since(t0);
+  res.surface_faces = g.faces();
+  report_progress(o.progress, 0.9, "texture: report");
+
+  // ---------------------------------------------------------------- report
+  {
+    MeshDistance md(res.surface, res.surface_faces);
+    rep.constraint_residual_px.resize(k);
+    for (int c = 0; c < k; ++c) {
+      int f = -1;
+      const Eigen::Vector3d p = md.closest(target[c], &f);
+      // Barycentric coordinates of p in face f -> pixel.
+      const Eigen::Vector3d a = res.surface.row(res.surface_faces(f, 0)), b = res.surface.row(res.surface_faces(f, 1)),
+                            cc = res.surface.row(res.surface_faces(f, 2));
+      const Eigen::Vector3d v0 = b - a, v1 = cc - a, v2 = p - a;
+      const double d00 = v0.dot(v0), d01 = v0.dot(v1), d11 = v1.dot(v1), d20 = v2.dot(v0), d21 = v2.dot(v1);
+      const double den = d00 * d11 - d01 * d01;
+      double bv = 0, bw = 0;
+      if (std::abs(den) > 0) {
+        bv = (d11 * d20 - d01 * d21) / den;
+        bw = (d00 * d21 - d01 * d20) / den;
+      }
+      const Eigen::Vector2d pix = (1 - bv - bw) * res.node_pixel.row(res.surface_faces(f, 0)).transpose() +
+                                  bv * res.node_pixel.row(res.surface_faces(f, 1)).transpose() +
+                                  bw * res.node_pixel.row(res.surface_faces(f, 2)).transpose();
+      rep.constraint_residual_px[c] = (pix - constraints_[c].pixel).norm();
+      rep.max_constraint_residual_px = std::max(rep.max_constraint_residual_px, rep.constraint_residual_px[c]);
+    }
+  }
+  {
+    // UV orientation, angle and area distortion over faces with three UVs.
+    std::vector<double> signed_uv;
+    std::vector<long> faces;
+    double a3 = 0, auv = 0;
+    for (long f = 0; f < F.rows(); ++f) {
+      const int i = F(f, 0), j = F(f, 1), l = F(f, 2);
+      if (res.status[i] == TextureVertexStatus::Unmatched || res.status[j] == TextureVertexStatus::Unmatched ||
+          res.status[l] == TextureVertexStatus::Unmatched)
+        continue;
+      const Eigen::Vector2d e1 = res.uv.row(j) - res.uv.row(i), e2 = res.uv.row(l) - res.uv.row(i);
+      signed_uv.push_back(0.5 * (e1.x() * e2.y() - e1.y() * e2.x()));
+      faces.push_back(f);
+      a3 += 0.5 * (V.row(j) - V.row(i)).cross(V.row(l) - V.row(i)).norm();
+      auv += std::abs(signed_uv.back());
+    }
+    rep.uv_faces = static_cast<long>(faces.size());
+    long pos = 0, neg = 0;
+    for (double s : signed_uv) {
+      if (s > 0) ++pos;
+      else if (s < 0) ++neg;
+    }
+    rep.flipped_uv_faces = std::min(pos, neg) + static_cast<long>(signed_uv.size()) - pos - neg;  // minority + zero-area
+    const double s2 = auv > 0 ? a3 / auv : 1.0;
+    std::vector<double> angle_err, area_err;
+    angle_err.reserve(faces.size());
+    area_err.reserve(faces.size());
+    auto angles3 = [](const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& p2, double* out) {
+      const Eigen::Vector3d q[3] = {p0, p1, p2};
+      for (int c = 0; c < 3; ++c) {
+        const Eigen::Vector3d a = q[(c + 1) % 3] - q[c], b = q[(c + 2) % 3] - q[c];
+        out[c] = std::atan2(a.cross(b).norm(), a.dot(b));
+      }
+    };
+    for (std::size_t t = 0; t < faces.size(); ++t) {
+      const long f = faces[t];
+      const int i = F(f, 0), j = F(f, 1), l = F(f, 2);
+      const double A3 = 0.5 * (V.row(j) - V.row(i)).cross(V.row(l) - V.row(i)).norm();
+      if (!(A3 > 0) || signed_uv[t] == 0) continue;
+      double ang3[3], anguv[3];
+      angles3(V.row(i), V.row(j), V.row(l), ang3);
+      const Eigen::Vector3d u0(res.uv(i, 0), res.uv(i, 1), 0), u1(res.uv(j, 0), res.uv(j, 1), 0), u2(res.uv(l, 0), res.uv(l, 1), 0);
+      angles3(u0, u1, u2, anguv);
+      double e = 0;
+      for (int c = 0; c < 3; ++c) e += std::abs(ang3[c] - anguv[c]);
+      angle_err.push_back(e / 3 * 180.0 / M_PI);
+      area_err.push_back(std::abs(std::log(std::abs(signed_uv[t]) * s2 / A3)));
+    }
+    auto mean = [](const std::vector<double>& x) { return x.empty() ? 0.0 : std::accumulate(x.begin(), x.end(), 0.0) / x.size(); };
+    rep.angle_distortion_mean_deg = mean(angle_err);
+    rep.angle_distortion_p95_deg = percentile(angle_err, 0.95);
+    rep.area_distortion_mean = mean(area_err);
+    rep.area_distortion_p95 = percentile(area_err, 0.95);
+  }
+  rep.roughness = roughness(g, res.surface);
+  rep.initial_roughness = roughness(g, res.initial_surface);
+  rep.t_total = seconds_since(t_start);
+  report_progress(o.progress, 1.0, "texture: done");
+  return res;
+}
+
+}  // namespace tbsp
