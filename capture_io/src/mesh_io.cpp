@@ -579,4 +579,45 @@ void write_mesh(const std::string& path, const TriMesh& mesh, const MeshWriteOpt
   f.commit();
 }
 
+void write_textured_obj(const std::string& path, const TriMesh& mesh, const Eigen::MatrixX2d& uv, const std::string& mtl_file,
+                        const std::string& material, const std::string& texture_file) {
+  if (uv.rows() != mesh.V.rows())
+    throw InvalidInput("write_textured_obj('" + path + "'): " + std::to_string(uv.rows()) + " texture coordinates for " +
+                       std::to_string(mesh.V.rows()) + " vertices");
+  {
+    AtomicFile mtl(mtl_file);
+    mtl.stream() << "# tbsp inverse texture mapping\nnewmtl " << material << "\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd "
+                 << texture_file << "\n";
+    mtl.commit();
+  }
+  AtomicFile out(path);
+  std::ostream& os = out.stream();
+  char buf[128];
+  std::string mtl_name = mtl_file;
+  const auto slash = mtl_name.find_last_of("/\\");
+  if (slash != std::string::npos) mtl_name = mtl_name.substr(slash + 1);
+  os << "# tbsp inverse texture mapping: " << mesh.V.rows() << " vertices, " << mesh.F.rows() << " faces\nmtllib " << mtl_name
+     << "\nusemtl " << material << "\n";
+  for (Eigen::Index i = 0; i < mesh.V.rows(); ++i) {
+    std::snprintf(buf, sizeof buf, "v %.9g %.9g %.9g\n", mesh.V(i, 0), mesh.V(i, 1), mesh.V(i, 2));
+    os << buf;
+  }
+  std::vector<long> vt(static_cast<std::size_t>(uv.rows()), 0);
+  long next = 1;
+  for (Eigen::Index i = 0; i < uv.rows(); ++i) {
+    if (!uv.row(i).allFinite()) continue;
+    std::snprintf(buf, sizeof buf, "vt %.9g %.9g\n", uv(i, 0), uv(i, 1));
+    os << buf;
+    vt[static_cast<std::size_t>(i)] = next++;
+  }
+  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
+    const long a = vt[mesh.F(f, 0)], b = vt[mesh.F(f, 1)], c = vt[mesh.F(f, 2)];
+    if (a && b && c)
+      os << "f " << mesh.F(f, 0) + 1 << '/' << a << ' ' << mesh.F(f, 1) + 1 << '/' << b << ' ' << mesh.F(f, 2) + 1 << '/' << c << '\n';
+    else
+      os << "f " << mesh.F(f, 0) + 1 << ' ' << mesh.F(f, 1) + 1 << ' ' << mesh.F(f, 2) + 1 << '\n';
+  }
+  out.commit();
+}
+
 }  // namespace tbsp

@@ -9,6 +9,7 @@
 
 #include "capture_cmds.h"
 #include "tet_cmds.h"
+#include "texture_cmds.h"
 #include "progress_bar.h"
 #include "tbsp/core/error.h"
 #include "tbsp/core/logging.h"
@@ -397,6 +398,9 @@ int main(int argc, char** argv) {
   tbsp::cli::TetDeformArgs tda;
   CLI::App* tetdeform = nullptr;
   tbsp::cli::add_tetdeform(app, tda, tetdeform);
+  tbsp::cli::TextureArgs txa;
+  CLI::App* texture = nullptr;
+  tbsp::cli::add_texture(app, txa, texture);
 
   std::string demo_in = TBSP_SAMPLE_DATA_DIR, demo_out = "tbsp_demo_out";
   bool demo_quiet = false;
@@ -453,6 +457,7 @@ int main(int argc, char** argv) {
     if (*synth_studio) return tbsp::cli::cmd_synth_studio(ssa);
     if (*replay) return tbsp::cli::cmd_replay(ra);
     if (*tetdeform) return tbsp::cli::cmd_tetdeform(tda);
+    if (*texture) return tbsp::cli::cmd_texture(txa);
   } catch (const tbsp::Cancelled& e) {
     std::cerr << "tbsp " << sub << ": cancelled: " << e.what() << "\n";
     return 130;

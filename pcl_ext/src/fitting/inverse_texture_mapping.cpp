@@ -210,9 +210,9 @@ TextureMappingResult InverseTextureMapping::compute() const {
   const int k = static_cast<int>(constraints_.size());
   if (k < 3) throw InvalidInput(who + " " + std::to_string(k) + " constraint(s) given; at least 3 (not on one line) are needed to place the image");
   if (!(o.omega > 0) || !(o.sigma >= 0) || !(o.epsilon_factor > 0) || !(o.ratio_low > 0) || !(o.ratio_high > o.ratio_low) ||
-      o.max_solve_nodes < 16 || o.max_geodesic_nodes < 16 || !(o.heat_time_factor > 0) || !std::isfinite(o.normal_offset))
+      o.max_solve_nodes < 16 || o.rounds < 1 || o.max_geodesic_nodes < 16 || !(o.heat_time_factor > 0) || !std::isfinite(o.normal_offset))
     throw InvalidInput(who + " invalid options: need omega > 0, sigma >= 0, epsilon_factor > 0, 0 < ratio_low < ratio_high, "
-                             "max_solve_nodes and max_geodesic_nodes >= 16, heat_time_factor > 0, finite normal_offset");
+                             "max_solve_nodes and max_geodesic_nodes >= 16, rounds >= 1, heat_time_factor > 0, finite normal_offset");
   const Eigen::MatrixX3d& V = mesh_.V;
   const Eigen::MatrixX3i& F = mesh_.F;
   const long nv = V.rows();
@@ -380,12 +380,17 @@ TextureMappingResult InverseTextureMapping::compute() const {
   }
   rep.geodesic_nodes = gg.active();
   if (gg.active() == 0) throw InvalidInput(who + " the pattern is too thin for the geodesic grid; raise max_geodesic_nodes");
-  Eigen::MatrixX3d GX(gg.active(), 3);
-  for (long a = 0; a < gg.active(); ++a) GX.row(a) = res.initial_surface.row(g.at(gg.node_x[a] * step, gg.node_y[a] * step));
   std::vector<std::vector<std::pair<int, double>>> gw(k);
   for (int c = 0; c < k; ++c)
     if (!gg.weights(constraints_[c].pixel, gw[c]))
       throw InvalidInput(who + " constraint " + std::to_string(c) + " (pixel " + px(constraints_[c].pixel) + ") falls outside the coarser geodesic grid; raise max_geodesic_nodes");
+  rep.t_texture_geodesics += seconds_since(t0);
+  res.surface = res.initial_surface;
+  for (int round = 0; round < o.rounds; ++round) {
+  t0 = Clock::now();
+  const Eigen::MatrixX3d current = res.surface;
+  Eigen::MatrixX3d GX(gg.active(), 3);
+  for (long a = 0; a < gg.active(); ++a) GX.row(a) = current.row(g.at(gg.node_x[a] * step, gg.node_y[a] * step));
   Eigen::MatrixXd FS(gg.active(), k);
   if (o.match_distance == MatchDistance::DeformedSurface) {
     FS = HeatGeodesics(GX, gg.faces(), hopt).distances(gw);
@@ -394,15 +399,15 @@ TextureMappingResult InverseTextureMapping::compute() const {
     double len3 = 0, lenp = 0;
     for (long a = 0; a < g.active(); ++a) {
       const int i = g.node_x[a], j = g.node_y[a];
-      if (g.at(i + 1, j) >= 0) { len3 += (res.initial_surface.row(g.at(i + 1, j)) - res.initial_surface.row(a)).norm(); lenp += g.sx; }
-      if (g.at(i, j + 1) >= 0) { len3 += (res.initial_surface.row(g.at(i, j + 1)) - res.initial_surface.row(a)).norm(); lenp += g.sy; }
+      if (g.at(i + 1, j) >= 0) { len3 += (current.row(g.at(i + 1, j)) - current.row(a)).norm(); lenp += g.sx; }
+      if (g.at(i, j + 1) >= 0) { len3 += (current.row(g.at(i, j + 1)) - current.row(a)).norm(); lenp += g.sy; }
     }
     const double scale = lenp > 0 ? len3 / lenp : 1.0;
     for (long a = 0; a < gg.active(); ++a)
       for (int c = 0; c < k; ++c) FS(a, c) = scale * (gg.pixel(static_cast<int>(a)) - constraints_[c].pixel).norm();
   }
-  rep.t_texture_geodesics = seconds_since(t0);
-  report_progress(o.progress, 0.6, "texture: matching");
+  rep.t_texture_geodesics += seconds_since(t0);
+  report_progress(o.progress, 0.6 + 0.3 * round / o.rounds, "texture: matching");
 
   // ---------------------------------------------------------------- matching
   t0 = Clock::now();
@@ -417,6 +422,8 @@ TextureMappingResult InverseTextureMapping::compute() const {
     for (const auto& [a, w] : gw[c]) s += w * FS(a, ch);
     return s;
   };
+  rep.dropped_channels = 0;
+  rep.matched = rep.unmatched = 0;
   std::vector<std::vector<char>> keep(k, std::vector<char>(k, 1));  // keep[a][b]: channel b near constraint a
   if (o.mismatch_detection) {
     const double tiny = 1e-9 * diag;
@@ -447,11 +454,23 @@ TextureMappingResult InverseTextureMapping::compute() const {
       res.uv.row(constraints_[c].vertex) = constraints_[c].pixel.transpose();
     }
   // Group the free vertices by the channel set they use (nearest constraint's keep row).
+  const int m_local = o.local_channels > 0 ? std::min(k, std::max(3, o.local_channels)) : k;
   std::map<std::vector<char>, std::vector<long>> groups;
   for (long v = 0; v < nv; ++v) {
     if (res.status[v] == TextureVertexStatus::Constraint) continue;
     if (!FT.row(v).allFinite()) continue;  // another component than some constraint
-    groups[keep[nearest_constraint(FT, v)]].push_back(v);
+    std::vector<char> key = keep[nearest_constraint(FT, v)];
+    if (m_local < k) {
+      // Only the m nearest constraints' channels: local geodesic coordinates are reliable,
+      // far ones wrap around closed surfaces differently on the mesh and on the image.
+      std::vector<int> order(k);
+      std::iota(order.begin(), order.end(), 0);
+      std::partial_sort(order.begin(), order.begin() + m_local, order.end(), [&](int a, int b) { return FT(v, a) < FT(v, b); });
+      std::vector<char> near(k, 0);
+      for (int t = 0; t < m_local; ++t) near[order[t]] = 1;
+      for (int c = 0; c < k; ++c) key[c] = key[c] && near[c];
+    }
+    groups[key].push_back(v);
   }
   // Grid-node channel masks: nodes use the channels of their own nearest constraint.
   std::vector<int> node_cell(gg.active());
@@ -464,9 +483,14 @@ TextureMappingResult InverseTextureMapping::compute() const {
     if (kd == 0) continue;
     // Nodes whose own channel set disagrees with this one still take part: the dropped channels
     // are simply ignored for this group (a node's mask only matters for its own cell).
-    KdMatrix P(gg.active(), kd);
+    // Candidate nodes: all, or (local channels) those whose nearest constraint is one of the group's.
+    std::vector<int> nodes;
     for (long a = 0; a < gg.active(); ++a)
-      for (int t = 0; t < kd; ++t) P(a, t) = FS(a, ch[t]);
+      if (m_local == k || mask[node_cell[a]]) nodes.push_back(static_cast<int>(a));
+    if (nodes.empty()) continue;
+    KdMatrix P(static_cast<Eigen::Index>(nodes.size()), kd);
+    for (std::size_t r = 0; r < nodes.size(); ++r)
+      for (int t = 0; t < kd; ++t) P(static_cast<Eigen::Index>(r), t) = FS(nodes[r], ch[t]);
     KdTree tree(kd, std::cref(P), 16);
     const double eps = o.epsilon_factor * diag * k;
     rep.epsilon = eps;
@@ -482,6 +506,7 @@ TextureMappingResult InverseTextureMapping::compute() const {
       rs.init(&idx, &d2);
       tree.index->findNeighbors(rs, f.data(), nanoflann::SearchParams());
       if (!(std::sqrt(d2) < eps_group)) continue;
+      idx = nodes[idx];
       // Sub-node refinement: Gauss-Newton on the bilinear field around the node.
       double u = gg.node_x[idx], w = gg.node_y[idx];
       const double u0 = u, w0 = w;
@@ -518,8 +543,7 @@ TextureMappingResult InverseTextureMapping::compute() const {
     if (res.status[v] == TextureVertexStatus::Unmatched) ++rep.unmatched;
   }
   rep.matched_fraction = nv > 0 ? 1.0 - static_cast<double>(rep.unmatched) / nv : 0.0;
-  rep.t_matching = seconds_since(t0);
-  report_progress(o.progress, 0.7, "texture: deform 2");
+  rep.t_matching += seconds_since(t0);
 
   // ---------------------------------------------------------------- deform 2 (eq. 4.3)
   t0 = Clock::now();
@@ -534,10 +558,9 @@ TextureMappingResult InverseTextureMapping::compute() const {
       ne.addRow(wts.data(), static_cast<int>(wts.size()), o.sigma * o.sigma, q);
     }
     res.surface = solve(ne, chol, "deform 2");
-  } else {
-    res.surface = res.initial_surface;
   }
-  rep.t_deform2 = seconds_since(t0);
+  rep.t_deform2 += seconds_since(t0);
+  }  // rounds
   res.surface_faces = g.faces();
   report_progress(o.progress, 0.9, "texture: report");
 

@@ -39,4 +39,11 @@ struct MeshWriteOptions {
 void write_mesh(const std::string& path, const TriMesh& mesh, const MeshWriteOptions& options = {},
                 MeshFormat format = MeshFormat::Auto);
 
+/// \brief Writes a textured OBJ and its MTL (both atomically): `uv` holds one OBJ texture
+/// coordinate per vertex (u right, v up, in [0,1]); rows with NaN have none, and faces touching
+/// such a vertex are written untextured. The MTL names `texture_file` (relative to the MTL).
+/// \throws FileError, InvalidInput when uv does not have one row per vertex.
+void write_textured_obj(const std::string& path, const TriMesh& mesh, const Eigen::MatrixX2d& uv, const std::string& mtl_file,
+                        const std::string& material, const std::string& texture_file);
+
 }  // namespace tbsp

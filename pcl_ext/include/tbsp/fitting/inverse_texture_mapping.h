@@ -68,7 +68,7 @@ enum class MatchDistance {
 };
 
 struct InverseTextureMappingOptions {
-  double omega = 1.0;              ///< weight of the constraints (both deformations); large = hard
+  double omega = 10.0;             ///< weight of the constraints (both deformations); large = hard
   double sigma = 1.0;              ///< weight of the matches in deform 2; small = smoother, 0 = deform 1 only
   double epsilon_factor = 0.01;    ///< ε = epsilon_factor · bbox diagonal · k (eq. 4.2)
   double ratio_low = 0.8;          ///< mismatch test bounds on mesh/image constraint distances
@@ -78,6 +78,8 @@ struct InverseTextureMappingOptions {
   long max_solve_nodes = 400000;   ///< larger images are solved on a grid of one node per s×s pixels
   long max_geodesic_nodes = 70000; ///< texture geodesics on at most this many grid nodes
   double heat_time_factor = 1.0;   ///< heat-method time step t = factor · h²
+  int local_channels = 0;          ///< > 0: match on the distances to the m nearest constraints only (closed / high-genus meshes); 0 = all k (thesis)
+  int rounds = 1;                  ///< matching + deform-2 rounds; round r > 1 measures texture geodesics on the round r-1 surface
   double normal_offset = 0.0;      ///< draping (§4.4): targets moved along the mesh normals (mesh units)
   ProgressCallback progress;
 };
