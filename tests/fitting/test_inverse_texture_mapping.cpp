@@ -31,15 +31,26 @@ void print(const char* name, const TextureMappingReport& p) {
               p.flipped_uv_faces, p.uv_faces, p.angle_distortion_mean_deg, p.angle_distortion_p95_deg, p.area_distortion_mean,
               p.area_distortion_p95, p.roughness, p.initial_roughness, p.t_total);
 }
+struct FaceCase {
+  TriMesh m;
+  int W = 256, H = 256;
+  std::vector<TextureConstraint> cons;
+};
+/// face.off with 12 constraints from its planar layout in a 256x256 image.
+FaceCase face_case() {
+  FaceCase c;
+  c.m = read_mesh(test::shared(kFace));
+  c.cons = test::layout_constraints(c.m.V, test::reference_layout(c.m.V, c.W, c.H, false), c.W, c.H, 12, false);
+  return c;
+}
 }  // namespace
 
 TEST(Texture, DiscLikeFaceMesh) {
-  const std::string path = test::shared(kFace);
-  TBSP_REQUIRE_FILE(path);
-  const TriMesh m = read_mesh(path);
-  const int W = 256, H = 256;
-  const auto layout = test::reference_layout(m.V, W, H, false);
-  const auto cons = test::layout_constraints(m.V, layout, W, H, 12, false);
+  TBSP_REQUIRE_FILE(test::shared(kFace));
+  const FaceCase fc = face_case();
+  const TriMesh& m = fc.m;
+  const int W = fc.W, H = fc.H;
+  const auto& cons = fc.cons;
   const TextureMappingResult r = run(m, W, H, cons);
   const auto& p = r.report;
   print("face.off", p);
@@ -78,12 +89,11 @@ TEST(Texture, ClosedGenus0And2Meshes) {
 }
 
 TEST(Texture, SigmaSmoothsOnANoisyMesh) {
-  const std::string path = test::shared(kFace);
-  TBSP_REQUIRE_FILE(path);
-  TriMesh m = read_mesh(path);
-  const int W = 256, H = 256;
-  const auto layout = test::reference_layout(m.V, W, H, false);
-  const auto cons = test::layout_constraints(m.V, layout, W, H, 12, false);
+  TBSP_REQUIRE_FILE(test::shared(kFace));
+  FaceCase fc = face_case();
+  TriMesh& m = fc.m;
+  const int W = fc.W, H = fc.H;
+  const auto& cons = fc.cons;
   std::mt19937 rng(3);
   std::normal_distribution<double> n(0, 0.005 * bbox_diagonal(m.V));
   for (Eigen::Index i = 0; i < m.V.rows(); ++i)
@@ -102,12 +112,11 @@ TEST(Texture, SigmaSmoothsOnANoisyMesh) {
 }
 
 TEST(Texture, GeodesicsOnTheDeformedImageBeatImagePlaneDistances) {
-  const std::string path = test::shared(kFace);
-  TBSP_REQUIRE_FILE(path);
-  const TriMesh m = read_mesh(path);
-  const int W = 256, H = 256;
-  const auto layout = test::reference_layout(m.V, W, H, false);
-  const auto cons = test::layout_constraints(m.V, layout, W, H, 12, false);
+  TBSP_REQUIRE_FILE(test::shared(kFace));
+  const FaceCase fc = face_case();
+  const TriMesh& m = fc.m;
+  const int W = fc.W, H = fc.H;
+  const auto& cons = fc.cons;
   InverseTextureMappingOptions o;
   const auto geo = run(m, W, H, cons, o);
   o.match_distance = MatchDistance::ImagePlane;
