@@ -15,6 +15,7 @@
 #include "tbsp/plugins/json_file.h"
 #include "tbsp/plugins/preview_render.h"
 #include "tbsp/plugins/texture_json.h"
+#include "tbsp/plugins/texture_preview.h"
 
 namespace fs = std::filesystem;
 
@@ -30,24 +31,6 @@ cv::Mat read_image(const std::string& path, int flags, const std::string& what) 
   }
   if (img.empty()) throw FileError("'" + path + "': cannot read the " + what + " (not an image OpenCV can decode: use PNG or JPEG)");
   return img;
-}
-
-/// Bilinear colour (RGB in [0,1]) of a BGR image at a pixel position.
-Eigen::RowVector3d sample(const cv::Mat& img, double x, double y) {
-  x = std::clamp(x, 0.0, img.cols - 1.0);
-  y = std::clamp(y, 0.0, img.rows - 1.0);
-  const int x0 = std::min(static_cast<int>(x), img.cols - 2 < 0 ? 0 : img.cols - 2), y0 = std::min(static_cast<int>(y), img.rows - 2 < 0 ? 0 : img.rows - 2);
-  const int x1 = std::min(x0 + 1, img.cols - 1), y1 = std::min(y0 + 1, img.rows - 1);
-  const double fx = x - x0, fy = y - y0;
-  Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
-  const int xs[2] = {x0, x1}, ys[2] = {y0, y1};
-  const double wx[2] = {1 - fx, fx}, wy[2] = {1 - fy, fy};
-  for (int a = 0; a < 2; ++a)
-    for (int b = 0; b < 2; ++b) {
-      const cv::Vec3b p = img.at<cv::Vec3b>(ys[b], xs[a]);
-      c += wx[a] * wy[b] * Eigen::RowVector3d(p[2], p[1], p[0]) / 255.0;
-    }
-  return c;
 }
 
 void write_png(const std::string& path, const cv::Mat& img) {
@@ -79,7 +62,7 @@ void add_texture(CLI::App& app, TextureArgs& a, CLI::App*& sub) {
   sub->add_flag("--plane-distances", a.plane, "match with flat-image distances instead of geodesics on the deformed image (Fig. 4.7 baseline)");
   sub->add_flag("--no-mismatch-detection", a.no_mismatch, "keep all distance channels (no 0.8/1.25 ratio test)");
   sub->add_option("--report", a.report, "JSON report: residuals, matched fraction, distortion, timings");
-  sub->add_option("--render", a.render, "PNG: the textured mesh (vertex colours from the texture) next to the deformed image surface");
+  sub->add_option("--render", a.render, "PNG: the textured mesh next to the deformed image surface, seen head-on");
   sub->add_flag("-q,--quiet", a.quiet, "no progress bar or summary");
 }
 
@@ -136,26 +119,23 @@ int cmd_texture(const TextureArgs& a) {
   write_png(tex.string(), img);
   write_textured_obj(obj.string(), mesh, uv, mtl.string(), "texture", tex.filename().string());
 
+  RgbImage rgb;  // the texture as RGB for colouring the outputs
+  rgb.width = img.cols;
+  rgb.height = img.rows;
+  rgb.rgb.resize(static_cast<std::size_t>(img.cols) * img.rows * 3);
+  for (int y = 0; y < img.rows; ++y)
+    for (int x = 0; x < img.cols; ++x) {
+      const cv::Vec3b q = img.at<cv::Vec3b>(y, x);
+      for (int c = 0; c < 3; ++c) rgb.rgb[(static_cast<std::size_t>(y) * img.cols + x) * 3 + c] = q[2 - c];
+    }
   TriMesh surf;
   surf.V = r.surface;
   surf.F = r.surface_faces;
   surf.C.resize(surf.V.rows(), 3);
-  for (Eigen::Index a2 = 0; a2 < surf.V.rows(); ++a2) surf.C.row(a2) = sample(img, r.node_pixel(a2, 0), r.node_pixel(a2, 1));
+  for (Eigen::Index a2 = 0; a2 < surf.V.rows(); ++a2) surf.C.row(a2) = rgb.at(r.node_pixel(a2, 0), r.node_pixel(a2, 1));
   if (!a.surface.empty()) write_mesh(a.surface, surf);
   if (!a.render.empty()) {
-    TriMesh coloured = mesh;
-    coloured.C.resize(mesh.V.rows(), 3);
-    for (Eigen::Index i = 0; i < mesh.V.rows(); ++i)
-      coloured.C.row(i) = r.uv.row(i).allFinite() ? sample(img, r.uv(i, 0), r.uv(i, 1)) : Eigen::RowVector3d(0.5, 0.5, 0.5);
-    RenderPanel p1, p2;
-    p1.mesh = coloured;
-    p1.title = "mesh, colours from the texture (" + std::to_string(static_cast<int>(100 * p.matched_fraction + 0.5)) + "% matched)";
-    p2.mesh = surf;
-    p2.title = "deformed image surface";
-    RenderOptions ro;
-    ro.azimuth_deg = 0;
-    ro.elevation_deg = 0;
-    render_panels_png(a.render, {p1, p2}, ro);
+    render_texture_result_png(a.render, mesh, r, rgb);
   }
   if (!a.report.empty()) {
     nlohmann::json j;

@@ -473,6 +473,11 @@ TextureMappingResult InverseTextureMapping::compute() const {
     groups[key].push_back(v);
   }
   // Grid-node channel masks: nodes use the channels of their own nearest constraint.
+  std::vector<char> gg_border(gg.active(), 0);
+  for (long a = 0; a < gg.active(); ++a) {
+    const int i = gg.node_x[a], j = gg.node_y[a];
+    gg_border[a] = gg.at(i - 1, j) < 0 || gg.at(i + 1, j) < 0 || gg.at(i, j - 1) < 0 || gg.at(i, j + 1) < 0;
+  }
   std::vector<int> node_cell(gg.active());
   for (long a = 0; a < gg.active(); ++a) node_cell[a] = nearest_constraint(FS, a);
   for (const auto& [mask, verts] : groups) {
@@ -531,6 +536,12 @@ TextureMappingResult InverseTextureMapping::compute() const {
         u = std::clamp(u + delta.x(), std::max(0.0, u0 - 1), std::min(gg.w - 1.0, u0 + 1));
         w = std::clamp(w + delta.y(), std::max(0.0, w0 - 1), std::min(gg.h - 1.0, w0 + 1));
         if (delta.norm() < 1e-3) break;
+      }
+      if (o.reject_border_matches) {
+        // A vertex beyond the edge of the image (or of a pattern piece) finds its nearest vector
+        // on the edge: such matches pile up on the border and fold the UVs there.
+        const int nd = gg.at(static_cast<int>(std::lround(u)), static_cast<int>(std::lround(w)));
+        if (nd < 0 || gg_border[nd]) continue;
       }
       res.uv(v, 0) = u * gg.sx;
       res.uv(v, 1) = w * gg.sy;

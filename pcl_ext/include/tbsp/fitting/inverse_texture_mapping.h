@@ -74,6 +74,10 @@ struct InverseTextureMappingOptions {
   double ratio_low = 0.8;          ///< mismatch test bounds on mesh/image constraint distances
   double ratio_high = 1.25;
   bool mismatch_detection = true;
+  /// Reject matches that land on the outermost grid nodes of the image or a pattern piece: a
+  /// vertex beyond the image's edge has its nearest distance vector on the edge, so without this
+  /// the part of a closed mesh the image does not reach is folded onto the image border.
+  bool reject_border_matches = true;
   MatchDistance match_distance = MatchDistance::DeformedSurface;
   long max_solve_nodes = 400000;   ///< larger images are solved on a grid of one node per s×s pixels
   long max_geodesic_nodes = 70000; ///< texture geodesics on at most this many grid nodes
