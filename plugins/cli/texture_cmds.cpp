@@ -158,6 +158,9 @@ int cmd_texture(const TextureArgs& a) {
     j["angle_distortion_deg"] = {{"mean", p.angle_distortion_mean_deg}, {"p95", p.angle_distortion_p95_deg}};
     j["area_distortion_log"] = {{"mean", p.area_distortion_mean}, {"p95", p.area_distortion_p95}};
     j["roughness"] = {{"final", p.roughness}, {"initial", p.initial_roughness}};
+    j["image_on_mesh"] = {{"cells", p.surface_cells_on_mesh}, {"angle_distortion_mean_deg", p.surface_angle_distortion_mean_deg},
+                          {"area_distortion_log_mean", p.surface_area_distortion_mean}, {"mesh_to_surface_mean", p.mesh_to_surface_mean},
+                          {"mesh_to_surface_max", p.mesh_to_surface_max}};
     j["timings_s"] = {{"deform1", p.t_deform1},   {"mesh_geodesics", p.t_mesh_geodesics}, {"texture_geodesics", p.t_texture_geodesics},
                       {"matching", p.t_matching}, {"deform2", p.t_deform2},               {"total", p.t_total}};
     j["options"] = {{"omega", a.omega}, {"sigma", a.sigma}, {"epsilon_factor", a.epsilon}, {"offset", a.offset},

@@ -210,9 +210,9 @@ TextureMappingResult InverseTextureMapping::compute() const {
   const int k = static_cast<int>(constraints_.size());
   if (k < 3) throw InvalidInput(who + " " + std::to_string(k) + " constraint(s) given; at least 3 (not on one line) are needed to place the image");
   if (!(o.omega > 0) || !(o.sigma >= 0) || !(o.epsilon_factor > 0) || !(o.ratio_low > 0) || !(o.ratio_high > o.ratio_low) ||
-      o.max_solve_nodes < 16 || o.rounds < 1 || o.max_geodesic_nodes < 16 || !(o.heat_time_factor > 0) || !std::isfinite(o.normal_offset))
+      o.max_solve_nodes < 16 || o.max_geodesic_nodes < 16 || !(o.heat_time_factor > 0) || !std::isfinite(o.normal_offset))
     throw InvalidInput(who + " invalid options: need omega > 0, sigma >= 0, epsilon_factor > 0, 0 < ratio_low < ratio_high, "
-                             "max_solve_nodes and max_geodesic_nodes >= 16, rounds >= 1, heat_time_factor > 0, finite normal_offset");
+                             "max_solve_nodes and max_geodesic_nodes >= 16, heat_time_factor > 0, finite normal_offset");
   const Eigen::MatrixX3d& V = mesh_.V;
   const Eigen::MatrixX3i& F = mesh_.F;
   const long nv = V.rows();
@@ -386,7 +386,7 @@ TextureMappingResult InverseTextureMapping::compute() const {
       throw InvalidInput(who + " constraint " + std::to_string(c) + " (pixel " + px(constraints_[c].pixel) + ") falls outside the coarser geodesic grid; raise max_geodesic_nodes");
   rep.t_texture_geodesics += seconds_since(t0);
   res.surface = res.initial_surface;
-  for (int round = 0; round < o.rounds; ++round) {
+  {
   t0 = Clock::now();
   const Eigen::MatrixX3d current = res.surface;
   Eigen::MatrixX3d GX(gg.active(), 3);
@@ -407,7 +407,7 @@ TextureMappingResult InverseTextureMapping::compute() const {
       for (int c = 0; c < k; ++c) FS(a, c) = scale * (gg.pixel(static_cast<int>(a)) - constraints_[c].pixel).norm();
   }
   rep.t_texture_geodesics += seconds_since(t0);
-  report_progress(o.progress, 0.6 + 0.3 * round / o.rounds, "texture: matching");
+  report_progress(o.progress, 0.6, "texture: matching");
 
   // ---------------------------------------------------------------- matching
   t0 = Clock::now();
@@ -571,7 +571,7 @@ TextureMappingResult InverseTextureMapping::compute() const {
     res.surface = solve(ne, chol, "deform 2");
   }
   rep.t_deform2 += seconds_since(t0);
-  }  // rounds
+  }
   res.surface_faces = g.faces();
   report_progress(o.progress, 0.9, "texture: report");
 
@@ -653,6 +653,47 @@ TextureMappingResult InverseTextureMapping::compute() const {
     rep.angle_distortion_p95_deg = percentile(angle_err, 0.95);
     rep.area_distortion_mean = mean(area_err);
     rep.area_distortion_p95 = percentile(area_err, 0.95);
+  }
+  {
+    // Distortion of the deformed image itself where it lies on the mesh (what Fig. 4.7 shows):
+    // grid cells whose three corners are within 1 % of the bbox diagonal of the (offset) mesh.
+    const MeshDistance mesh_md(V, F);
+    const Eigen::VectorXd d_node = mesh_md.distances(res.surface);
+    const Eigen::VectorXd d_vert = MeshDistance(res.surface, res.surface_faces).distances(V);
+    const double near = 0.01 * diag + std::abs(o.normal_offset);
+    std::vector<double> cell_angle, cell_area;
+    for (int j = 0; j + 1 < g.h; ++j)
+      for (int i = 0; i + 1 < g.w; ++i) {
+        const int a = g.at(i, j), b = g.at(i + 1, j), c = g.at(i, j + 1);
+        if (a < 0 || b < 0 || c < 0 || d_node(a) > near || d_node(b) > near || d_node(c) > near) continue;
+        const Eigen::Vector3d e1 = res.surface.row(b) - res.surface.row(a), e2 = res.surface.row(c) - res.surface.row(a);
+        const double ar = e1.cross(e2).norm();
+        if (!(ar > 0)) continue;
+        cell_angle.push_back(std::abs(std::atan2(ar, e1.dot(e2)) * 180.0 / M_PI - 90.0));
+        cell_area.push_back(ar);
+      }
+    rep.surface_cells_on_mesh = static_cast<long>(cell_area.size());
+    if (!cell_area.empty()) {
+      const double med = percentile(cell_area, 0.5);
+      double sa = 0, sl = 0;
+      for (std::size_t t = 0; t < cell_area.size(); ++t) {
+        sa += cell_angle[t];
+        sl += std::abs(std::log(cell_area[t] / med));
+      }
+      rep.surface_angle_distortion_mean_deg = sa / cell_area.size();
+      rep.surface_area_distortion_mean = sl / cell_area.size();
+    }
+    // Only the vertices the image reaches (matched or constraints) count for the fit.
+    double sum = 0;
+    long n = 0;
+    for (long v = 0; v < nv; ++v)
+      if (res.status[v] != TextureVertexStatus::Unmatched) {
+        const double dv = std::abs(d_vert(v) - std::abs(o.normal_offset));
+        sum += dv;
+        rep.mesh_to_surface_max = std::max(rep.mesh_to_surface_max, dv);
+        ++n;
+      }
+    rep.mesh_to_surface_mean = n ? sum / n : 0.0;
   }
   rep.roughness = roughness(g, res.surface);
   rep.initial_roughness = roughness(g, res.initial_surface);

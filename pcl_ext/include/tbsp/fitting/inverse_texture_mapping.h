@@ -83,7 +83,6 @@ struct InverseTextureMappingOptions {
   long max_geodesic_nodes = 70000; ///< texture geodesics on at most this many grid nodes
   double heat_time_factor = 1.0;   ///< heat-method time step t = factor · h²
   int local_channels = 0;          ///< > 0: match on the distances to the m nearest constraints only (closed / high-genus meshes); 0 = all k (thesis)
-  int rounds = 1;                  ///< matching + deform-2 rounds; round r > 1 measures texture geodesics on the round r-1 surface
   double normal_offset = 0.0;      ///< draping (§4.4): targets moved along the mesh normals (mesh units)
   ProgressCallback progress;
 };
@@ -103,6 +102,13 @@ struct TextureMappingReport {
   long uv_faces = 0, flipped_uv_faces = 0;  ///< faces with all three UVs; those with the minority orientation
   double angle_distortion_mean_deg = 0, angle_distortion_p95_deg = 0;   ///< |angle in 3D − angle in UV|
   double area_distortion_mean = 0, area_distortion_p95 = 0;             ///< |log(area_uv · s² / area_3d)|, s = global scale
+  /// Distortion of the deformed image where it lies on the mesh (cells within 1 % of the bbox
+  /// diagonal): mean |corner angle − 90°| and mean |log(cell area / median cell area)|.
+  double surface_angle_distortion_mean_deg = 0, surface_area_distortion_mean = 0;
+  long surface_cells_on_mesh = 0;
+  /// Distance from the matched/constraint vertices to the final surface (minus the normal
+  /// offset), mesh units: how well the textured surface reproduces the mesh.
+  double mesh_to_surface_mean = 0, mesh_to_surface_max = 0;
   double roughness = 0;                 ///< RMS second difference of the final surface / mean node spacing (dimensionless)
   double initial_roughness = 0;         ///< the same for the deform-1 surface
   double epsilon = 0;                   ///< ε in mesh units
