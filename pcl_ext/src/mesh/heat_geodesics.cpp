@@ -38,7 +38,7 @@ HeatGeodesics::HeatGeodesics(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
   if (n == 0 || F.rows() == 0) throw InvalidInput("[HeatGeodesics] empty mesh: give at least one triangle");
   if (!V.allFinite()) throw InvalidInput("[HeatGeodesics] the mesh has non-finite vertex coordinates");
   if (F.minCoeff() < 0 || F.maxCoeff() >= n) throw InvalidInput("[HeatGeodesics] a triangle index is out of range [0, " + std::to_string(n) + ")");
-  if (!(options.time_factor > 0)) throw InvalidInput("[HeatGeodesics] time_factor must be > 0");
+  if (!(options.time_factor > 0) || !(options.time >= 0)) throw InvalidInput("[HeatGeodesics] time_factor must be > 0 and time >= 0");
   Impl& d = *impl_;
   d.V = V;
   d.F = F;
@@ -97,7 +97,7 @@ HeatGeodesics::HeatGeodesics(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
   mt.reserve(n);
   for (Eigen::Index i = 0; i < n; ++i) mt.emplace_back(i, i, d.mass(i));
   M.setFromTriplets(mt.begin(), mt.end());
-  const double t = options.time_factor * d.h * d.h;
+  const double t = options.time > 0 ? options.time : options.time_factor * d.h * d.h;
   d.heat.compute(Eigen::SparseMatrix<double>(M + t * K));
   // K is singular (constants per component); a tiny mass shift makes it definite. The
   // right-hand sides are projected to zero mean per component, so the shift changes φ by a

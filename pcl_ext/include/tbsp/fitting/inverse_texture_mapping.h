@@ -80,7 +80,7 @@ struct InverseTextureMappingOptions {
   bool reject_border_matches = true;
   MatchDistance match_distance = MatchDistance::DeformedSurface;
   long max_solve_nodes = 400000;   ///< larger images are solved on a grid of one node per s×s pixels
-  long max_geodesic_nodes = 70000; ///< texture geodesics on at most this many grid nodes
+  long max_geodesic_nodes = 20000; ///< deform 1 and the texture geodesics on a grid of at most this many nodes
   double heat_time_factor = 1.0;   ///< heat-method time step t = factor · h²
   int local_channels = 0;          ///< > 0: match on the distances to the m nearest constraints only (closed / high-genus meshes); 0 = all k (thesis)
   double normal_offset = 0.0;      ///< draping (§4.4): targets moved along the mesh normals (mesh units)
@@ -94,7 +94,9 @@ struct TextureMappingReport {
   int constraints = 0;
   long mesh_vertices = 0, pixels = 0, grid_nodes = 0, geodesic_nodes = 0;
   double pixels_per_node = 1;           ///< s: one solve node per s×s pixels
-  std::vector<double> constraint_residual_px;  ///< per constraint: pixel of the closest point of the final surface to the target, minus the constraint pixel
+  /// Per constraint: distance from where its pixel lands on the final surface to its target, in
+  /// units of the local size of a pixel on that surface (so 1 = one pixel off).
+  std::vector<double> constraint_residual_px;
   double max_constraint_residual_px = 0;
   double matched_fraction = 0;          ///< (constraint + matched vertices) / vertices
   long matched = 0, unmatched = 0;

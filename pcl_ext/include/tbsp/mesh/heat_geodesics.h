@@ -30,6 +30,9 @@ using WeightedSource = std::vector<std::pair<int, double>>;
 
 struct HeatGeodesicsOptions {
   double time_factor = 1.0;  ///< t = time_factor · (mean edge length)²
+  /// > 0: this heat time t (squared length units) instead — to compare distance fields of two
+  /// surfaces with the same smoothing, give both the same t.
+  double time = 0.0;
 };
 
 class HeatGeodesics {
