@@ -93,6 +93,7 @@ int cmd_texture(const TextureArgs& a) {
   o.max_solve_nodes = a.max_solve_nodes;
   o.max_geodesic_nodes = a.max_geodesic_nodes;
   o.mismatch_detection = !a.no_mismatch;
+  o.surface_fit_report = !a.report.empty();
   o.match_distance = a.plane ? MatchDistance::ImagePlane : MatchDistance::DeformedSurface;
   ProgressBar bar(!a.quiet);
   o.progress = bar.callback();

@@ -201,6 +201,7 @@ TEST(Texture, GeodesicsOnTheDeformedImageBeatImagePlaneDistances) {
   const int W = fc.W, H = fc.H;
   const auto& cons = fc.cons;
   InverseTextureMappingOptions o;
+  o.surface_fit_report = true;
   const auto geo = run(m, W, H, cons, o);
   o.match_distance = MatchDistance::ImagePlane;
   const auto plane = run(m, W, H, cons, o);

@@ -713,7 +713,7 @@ TextureMappingResult InverseTextureMapping::compute() const {
     rep.area_distortion_mean = mean(area_err);
     rep.area_distortion_p95 = percentile(area_err, 0.95);
   }
-  {
+  if (o.surface_fit_report) {
     // Distortion of the deformed image itself where it lies on the mesh (what Fig. 4.7 shows):
     // grid cells whose three corners are within 1 % of the bbox diagonal of the (offset) mesh.
     const MeshDistance mesh_md(V, F);
