@@ -1,6 +1,7 @@
 // Table 4.1 of the thesis: inverse texture mapping stage timings at the table's sizes, plus a
 // 5-megapixel image with peak memory. Usage: bench_texture [--quick] [--repeat N]
-// (each time is the median of N runs; the 5 MP row runs once).
+// [--only ROW] (each time is the median of N runs; the 5 MP row runs once; --only 5 runs just
+// the 5 MP row so that the peak RSS column is its own).
 #include <sys/resource.h>
 
 #include <Eigen/Dense>
@@ -93,11 +94,13 @@ long peak_rss_mb() {
 int main(int argc, char** argv) {
   bool quick = false;
   int repeat = 3;
+  int only = -1;  // run just this row (0-based), e.g. to read the 5 MP row's own peak memory
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--quick") == 0) quick = true;
     else if (std::strcmp(argv[i], "--repeat") == 0 && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
+    else if (std::strcmp(argv[i], "--only") == 0 && i + 1 < argc) only = std::atoi(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: bench_texture [--quick] [--repeat N]   (medians of N runs per row, default 3)\n");
+      std::fprintf(stderr, "usage: bench_texture [--quick] [--repeat N] [--only ROW]   (medians of N runs per row, default 3; ROW 0-based)\n");
       return 2;
     }
   }
@@ -122,6 +125,7 @@ int main(int argc, char** argv) {
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   const char* thesis[] = {"19.97 (1394/40K)", "51.4 (33K/65K)", "51.4 (33K/65K)", "212.52 (33K/262K)", "66.61 (220K/65K)", "could not"};
   for (std::size_t i = 0; i < rows.size(); ++i) {
+    if (only >= 0 && static_cast<std::size_t>(only) != i) continue;
     const Row& r = rows[i];
     InverseTextureMapping itm;
     itm.setInputMesh(r.mesh);

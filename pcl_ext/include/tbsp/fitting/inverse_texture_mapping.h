@@ -22,12 +22,14 @@
 ///    δ = 0: that energy also pulls the image border inwards (the boundary rows of the uniform
 ///    Laplacian are not zero on a flat grid); the thin-plate form has the same interior
 ///    behaviour (∫(Δx)² and ∫|∇²x|² differ by boundary terms only) and exactly the affine maps
-///    as its null space, so an undistorted image stays undistorted. One CHOLMOD factorization,
-///    three right-hand sides.
+///    as its null space, so an undistorted image stays undistorted. Solved on the geodesic grid
+///    (≤ `max_geodesic_nodes`) and bilinearly up-sampled to the solve grid: it only carries the
+///    texture geodesics, and the thin-plate solution is smooth.
 /// 2. **mesh geodesics**: distances from each constraint over the mesh (heat method,
-///    heat_geodesics.h; all k sources share one factorization).
-/// 3. **texture geodesics**: the same on the deformed image surface, triangulated grid,
-///    optionally on a coarser grid (`max_geodesic_nodes`), sources spread bilinearly.
+///    heat_geodesics.h; all k sources share one factorization). Mesh and image fields use the
+///    same heat time (the coarser surface's squared mean edge length × heat_time_factor).
+/// 3. **texture geodesics**: the same on the deform-1 surface of the geodesic grid
+///    (triangulated), sources spread bilinearly.
 ///    With MatchDistance::ImagePlane the flat-image (Euclidean) distances are used instead —
 ///    the Fig. 4.7 baseline.
 /// 4. **matching** (§4.2, eq. 4.2): every free mesh vertex is matched to the grid position whose
@@ -35,8 +37,10 @@
 ///    precision by Gauss-Newton on the bilinear distance field), accepted when the difference is
 ///    below ε = `epsilon_factor` · bbox diagonal · k. Mismatch detection: where the ratio of mesh
 ///    to image distances between two constraints a, b leaves [0.8, 1.25], channel b is dropped
-///    for the vertices and pixels whose nearest constraint is a.
-/// 5. **deform 2** (eq. 4.3): thin-plate energy + ω² on the constraints + σ² on the matches.
+///    for the vertices and pixels whose nearest constraint is a. Matches on the outermost grid
+///    nodes are rejected (`reject_border_matches`).
+/// 5. **deform 2** (eq. 4.3): thin-plate energy + ω² on the constraints + σ² on the matches, on
+///    the solve grid (≤ `max_solve_nodes`).
 ///
 /// Errors (tbsp::InvalidInput): fewer than 3 constraints, a constraint pixel outside the image or
 /// the mask, a constraint on a missing vertex/face, two constraints on one pixel, a
@@ -81,7 +85,7 @@ struct InverseTextureMappingOptions {
   MatchDistance match_distance = MatchDistance::DeformedSurface;
   long max_solve_nodes = 400000;   ///< larger images are solved on a grid of one node per s×s pixels
   long max_geodesic_nodes = 20000; ///< deform 1 and the texture geodesics on a grid of at most this many nodes
-  double heat_time_factor = 1.0;   ///< heat-method time step t = factor · h²
+  double heat_time_factor = 1.0;   ///< heat-method time t = factor · h², h = the larger mean edge length of mesh and geodesic grid
   int local_channels = 0;          ///< > 0: match on the distances to the m nearest constraints only (closed / high-genus meshes); 0 = all k (thesis)
   /// Also measure the deformed image's distortion on the mesh and its fit to the mesh (report
   /// fields surface_*, mesh_to_surface_*): two closest-point passes, ~20 % of a 65k-pixel run.
