@@ -120,15 +120,7 @@ int cmd_texture(const TextureArgs& a) {
   write_png(tex.string(), img);
   write_textured_obj(obj.string(), mesh, uv, mtl.string(), "texture", tex.filename().string());
 
-  RgbImage rgb;  // the texture as RGB for colouring the outputs
-  rgb.width = img.cols;
-  rgb.height = img.rows;
-  rgb.rgb.resize(static_cast<std::size_t>(img.cols) * img.rows * 3);
-  for (int y = 0; y < img.rows; ++y)
-    for (int x = 0; x < img.cols; ++x) {
-      const cv::Vec3b q = img.at<cv::Vec3b>(y, x);
-      for (int c = 0; c < 3; ++c) rgb.rgb[(static_cast<std::size_t>(y) * img.cols + x) * 3 + c] = q[2 - c];
-    }
+  const RgbImage rgb = read_rgb_image(a.image);  // the texture as RGB for colouring the outputs
   TriMesh surf;
   surf.V = r.surface;
   surf.F = r.surface_faces;

@@ -19,7 +19,7 @@ TEST(CliTexture, WritesTexturedMeshSurfaceReportAndRender) {
   const auto dir = test::temp_dir("cli_texture");
   const TriMesh m = read_mesh(mesh);
   const int W = 640, H = 480;
-  const auto layout = test::reference_layout(m.V, W, H, false);
+  const auto layout = test::reference_layout(m.V, W, H, false, &m.F);
   const auto cons = test::layout_constraints(m.V, layout, W, H, 12, false);
   nlohmann::json j;
   for (const auto& c : cons) j["constraints"].push_back({{"pixel", {c.pixel.x(), c.pixel.y()}}, {"vertex", c.vertex}});

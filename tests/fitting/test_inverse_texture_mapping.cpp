@@ -43,7 +43,7 @@ struct FaceCase {
 FaceCase face_case(int k = 12) {
   FaceCase c;
   c.m = read_mesh(test::shared(kFace));
-  c.cons = test::layout_constraints(c.m.V, test::reference_layout(c.m.V, c.W, c.H, false), c.W, c.H, k, false);
+  c.cons = test::layout_constraints(c.m.V, test::reference_layout(c.m.V, c.W, c.H, false, &c.m.F), c.W, c.H, k, false);
   return c;
 }
 /// Writes texture_renders/NAME.png (in the test's working directory, i.e. the build tree).

@@ -13,12 +13,21 @@
 namespace tbsp::test {
 
 /// Reference pixel positions of all vertices. Planar: PCA projection onto the two main axes,
-/// fitted into the image with a 6 % margin. Wrap: longitude/latitude around the main PCA axis.
-inline Eigen::MatrixX2d reference_layout(const Eigen::MatrixX3d& V, int W, int H, bool wrap) {
+/// fitted into the image with a 6 % margin (given the faces, oriented so that the image is not
+/// mirrored seen from the front). Wrap: longitude/latitude around the main PCA axis.
+inline Eigen::MatrixX2d reference_layout(const Eigen::MatrixX3d& V, int W, int H, bool wrap, const Eigen::MatrixX3i* F = nullptr) {
   const Eigen::RowVector3d c = V.colwise().mean();
   const Eigen::MatrixX3d X = V.rowwise() - c;
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(X.transpose() * X);
-  const Eigen::Vector3d a0 = es.eigenvectors().col(2), a1 = es.eigenvectors().col(1), a2 = es.eigenvectors().col(0);
+  const Eigen::Vector3d a0 = es.eigenvectors().col(2), a2 = es.eigenvectors().col(0);
+  Eigen::Vector3d a1 = es.eigenvectors().col(1);
+  if (!wrap && F != nullptr) {
+    // Not mirrored: seen along the mean normal, image x runs along a0 and image "up" along a1.
+    Eigen::Vector3d n = Eigen::Vector3d::Zero();
+    for (Eigen::Index f = 0; f < F->rows(); ++f)
+      n += (V.row((*F)(f, 1)) - V.row((*F)(f, 0))).cross(V.row((*F)(f, 2)) - V.row((*F)(f, 0))).transpose();
+    if (a0.cross(a1).dot(n) < 0) a1 = -a1;
+  }
   Eigen::MatrixX2d P(V.rows(), 2);
   for (Eigen::Index i = 0; i < V.rows(); ++i) {
     const Eigen::Vector3d x = X.row(i).transpose();
