@@ -42,6 +42,41 @@ Eigen::VectorXd dijkstra_distances(const Eigen::MatrixX3d& V, const std::vector<
   return d;
 }
 
+namespace {
+/// Dijkstra from one source that stops once every target is settled: distances at the targets.
+std::vector<double> dijkstra_to_targets(const Eigen::MatrixX3d& V, const std::vector<std::vector<int>>& adjacency, int source,
+                                        const std::vector<int>& targets, std::vector<int>& target_slot) {
+  const double inf = std::numeric_limits<double>::infinity();
+  std::vector<double> d(static_cast<std::size_t>(V.rows()), inf);
+  using Item = std::pair<double, int>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+  d[static_cast<std::size_t>(source)] = 0;
+  heap.emplace(0.0, source);
+  std::size_t left = targets.size();
+  std::vector<char> settled(targets.size(), 0);
+  while (!heap.empty() && left > 0) {
+    auto [du, u] = heap.top();
+    heap.pop();
+    if (du > d[static_cast<std::size_t>(u)]) continue;
+    const int slot = target_slot[static_cast<std::size_t>(u)];
+    if (slot >= 0 && !settled[static_cast<std::size_t>(slot)]) {
+      settled[static_cast<std::size_t>(slot)] = 1;
+      --left;
+    }
+    for (int v : adjacency[std::size_t(u)]) {
+      const double nd = du + (V.row(u) - V.row(v)).norm();
+      if (nd < d[static_cast<std::size_t>(v)]) {
+        d[static_cast<std::size_t>(v)] = nd;
+        heap.emplace(nd, v);
+      }
+    }
+  }
+  std::vector<double> out(targets.size());
+  for (std::size_t t = 0; t < targets.size(); ++t) out[t] = d[static_cast<std::size_t>(targets[t])];
+  return out;
+}
+}  // namespace
+
 Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                                          const std::vector<int>& vertices, const ProgressCallback& progress) {
   const auto adj = vertex_adjacency(F, V.rows());
@@ -51,13 +86,17 @@ Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen:
     if (v < 0 || v >= V.rows())
       throw InvalidInput("[tbsp::geodesic_distance_matrix] vertex " + std::to_string(v) + " is out of range (mesh has " +
                          std::to_string(V.rows()) + " vertices)");
+  // vertex -> index in `vertices` (a repeated vertex: its first index; the others read the same
+  // distance because they are the same vertex)
+  std::vector<int> slot(static_cast<std::size_t>(V.rows()), -1);
+  for (int b = k - 1; b >= 0; --b) slot[std::size_t(vertices[std::size_t(b)])] = b;
   std::atomic<int> done{0};
   std::atomic<bool> cancelled{false};
 #pragma omp parallel for schedule(dynamic)
   for (int a = 0; a < k; ++a) {
     if (cancelled) continue;
-    const Eigen::VectorXd d = dijkstra_distances(V, adj, {vertices[std::size_t(a)]});
-    for (int b = 0; b < k; ++b) D(a, b) = d(vertices[std::size_t(b)]);
+    const std::vector<double> d = dijkstra_to_targets(V, adj, vertices[std::size_t(a)], vertices, slot);
+    for (int b = 0; b < k; ++b) D(a, b) = d[std::size_t(b)];
     const int n_done = ++done;
 #pragma omp critical
     {
