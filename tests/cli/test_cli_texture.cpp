@@ -1,6 +1,7 @@
 // tbsp texture: outputs (OBJ + MTL + PNG, coloured surface, render, report) and bad input.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -8,6 +9,8 @@
 #include "../fitting/texture_test_util.h"
 #include "cli_util.h"
 #include "tbsp/io/mesh_io.h"
+#include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/mesh/primitives.h"
 
 using namespace tbsp;
 
@@ -72,4 +75,54 @@ TEST(CliTexture, WritesTexturedMeshSurfaceReportAndRender) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("notimage.png"), std::string::npos) << r.err;
   EXPECT_EQ(std::filesystem::last_write_time(out), before);
+}
+
+namespace {
+/// Binary PGM (P5) / PPM (P6) writers: OpenCV reads both, so the test needs no image library.
+void write_pnm(const std::filesystem::path& p, int w, int h, int channels, const std::vector<unsigned char>& data) {
+  std::ofstream out(p, std::ios::binary);
+  out << (channels == 1 ? "P5" : "P6") << "\n" << w << " " << h << "\n255\n";
+  out.write(reinterpret_cast<const char*>(data.data()), static_cast<std::streamsize>(data.size()));
+}
+}  // namespace
+
+// §4.4 from the command line: a masked pattern piece draped on a body with a normal offset; the
+// deformed image surface (--surface) is the garment. A mask of the wrong size is refused.
+TEST(CliTexture, DrapesAMaskedPatternAsAGarment) {
+  const auto dir = test::temp_dir("cli_texture_drape");
+  TriMesh body = make_tube(81, 48, 2.0, 0.3);
+  write_mesh((dir / "body.ply").string(), body);
+  const int W = 200, H = 160;
+  std::vector<unsigned char> img(static_cast<std::size_t>(W) * H * 3, 180), mask(static_cast<std::size_t>(W) * H, 0);
+  for (int y = 30; y < 130; ++y)
+    for (int x = 20; x < 180; ++x) mask[static_cast<std::size_t>(y) * W + x] = 255;
+  write_pnm(dir / "pattern.ppm", W, H, 3, img);
+  write_pnm(dir / "mask.pgm", W, H, 1, mask);
+  write_pnm(dir / "small_mask.pgm", W / 2, H, 1, std::vector<unsigned char>(static_cast<std::size_t>(W / 2) * H, 255));
+  // Pixel x -> position along the tube, pixel y -> angle in [-90°, 90°] on the +y side.
+  nlohmann::json j;
+  for (double fx : {0.15, 0.5, 0.85})
+    for (double fy : {0.25, 0.75}) {
+      const double a = M_PI * (fy - 0.5);
+      const Eigen::RowVector3d q(0.25 + 1.5 * fx, 0.3 * std::cos(a), 0.3 * std::sin(a));
+      Eigen::Index best = 0;
+      (body.V.rowwise() - q).rowwise().squaredNorm().minCoeff(&best);
+      j["constraints"].push_back({{"pixel", {20 + fx * 159, 30 + fy * 99}}, {"vertex", best}});
+    }
+  std::ofstream(dir / "c.json") << j.dump(1);
+  const std::string common = "texture --mesh " + (dir / "body.ply").string() + " --image " + (dir / "pattern.ppm").string() +
+                             " --constraints " + (dir / "c.json").string() + " --out " + (dir / "garment_tex.obj").string() + " --offset 0.03 -q";
+  auto r = test::run_cli(common + " --mask " + (dir / "mask.pgm").string() + " --surface " + (dir / "garment.ply").string(), dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const TriMesh garment = read_mesh((dir / "garment.ply").string());
+  // Only pattern pixels became garment: 100 x 160 pixels of the 200 x 160 image.
+  EXPECT_NEAR(static_cast<double>(garment.V.rows()), 100.0 * 160.0, 0.05 * 100 * 160);
+  const Eigen::VectorXd d = MeshDistance(body.V, body.F).distances(garment.V);
+  EXPECT_NEAR(d.mean(), 0.03, 0.006);
+  const auto before = std::filesystem::last_write_time(dir / "garment.ply");
+  r = test::run_cli(common + " --mask " + (dir / "small_mask.pgm").string() + " --surface " + (dir / "garment.ply").string(), dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("small_mask.pgm"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("the mask is 100x160"), std::string::npos) << r.err;
+  EXPECT_EQ(std::filesystem::last_write_time(dir / "garment.ply"), before);
 }
