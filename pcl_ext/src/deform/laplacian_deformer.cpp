@@ -3,6 +3,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -342,6 +343,11 @@ void LaplacianDeformer::buildSystem() {
     c.L_free.resize(n, nf);
     c.L_free.setFromTriplets(t.begin(), t.end());
     c.NL = Eigen::SparseMatrix<double>(c.L_free.transpose() * c.L_free);
+    // sorted inner indices (the in-place assembly below binary-searches them): a transposed
+    // copy is written in order
+    const Eigen::SparseMatrix<double, Eigen::RowMajor> sorted = c.NL;
+    c.NL = sorted;
+    c.NL.makeCompressed();
     c.nl_free_index = c.free_index;
   }
   // scalar rows
@@ -370,6 +376,47 @@ void LaplacianDeformer::buildSystem() {
   }
   // normal matrix: NL (per coordinate) + the constraint terms
   const Eigen::SparseMatrix<double>& NL = c.NL;
+  // fast path (uncoupled): every constraint term falls on NL's pattern (a vertex, or vertices of
+  // one face, which are neighbours in LᵀL), so N is NL with values added in place — no triplet
+  // sort of the whole matrix on every re-weighting; falls back below if an entry is missing
+  if (!c.coupled) {
+    Eigen::SparseMatrix<double> N = NL;
+    N.makeCompressed();
+    // the constraint terms are summed first and NL added last, as the triplet path below does:
+    // bit-identical matrices whichever path runs
+    std::vector<double> add(std::size_t(N.nonZeros()), 0.0);
+    bool ok = true;
+    for (const auto& r : c.rows) {
+      const double w2 = constraints_[std::size_t(r.cid)].weight * constraints_[std::size_t(r.cid)].weight;
+      for (auto [va, ba] : r.stencil) {
+        const int fa = c.free_index[std::size_t(va)];
+        if (fa < 0) continue;
+        for (auto [vb, bb] : r.stencil) {
+          const int fb = c.free_index[std::size_t(vb)];
+          if (fb < 0) continue;
+          const int* first = N.innerIndexPtr() + N.outerIndexPtr()[fb];
+          const int* last = N.innerIndexPtr() + N.outerIndexPtr()[fb + 1];
+          const int* at = std::lower_bound(first, last, fa);
+          if (at == last || *at != fa) { ok = false; break; }
+          add[std::size_t(at - N.innerIndexPtr())] += w2 * ba * bb;
+        }
+        if (!ok) break;
+      }
+      if (!ok) break;
+    }
+    for (std::size_t k = 0; ok && k < add.size(); ++k) N.valuePtr()[k] = add[k] + N.valuePtr()[k];
+    if (ok) {
+      c.anchor = nf > 0 ? anchor_ * N.diagonal().cwiseAbs().mean() : 0.0;
+      if (c.anchor > 0)
+        for (Eigen::Index i = 0; i < nf; ++i) N.coeffRef(i, i) += c.anchor;
+      report_progress(progress_, 0.3, "factorize");
+      const auto t0 = Clock::now();
+      if (nf > 0) c.solver.compute(N);
+      report_.t_factorize = seconds_since(t0);
+      c.matrix_valid = true;
+      return;
+    }
+  }
   std::vector<Eigen::Triplet<double>> t;
   const int dims = c.coupled ? 3 : 1;
   t.reserve((c.coupled ? std::size_t(NL.nonZeros()) * 3 : 0) + c.rows.size() * 27);
@@ -489,6 +536,10 @@ Eigen::MatrixX3d LaplacianDeformer::rotatedDelta() {
   if (!last_rotations_.empty())
     for (Eigen::Index i = 0; i < d.rows(); ++i) d.row(i) = (last_rotations_[std::size_t(i)] * d.row(i).transpose()).transpose();
   return d;
+}
+
+const ConstraintGraph* LaplacianDeformer::rotationGraph() const {
+  return cache_->graph_valid ? &cache_->graph : nullptr;
 }
 
 Eigen::MatrixX3d LaplacianDeformer::deform() {

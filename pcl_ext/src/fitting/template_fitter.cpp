@@ -71,6 +71,9 @@ bool FitParameters::isValid(std::string* why) const {
   if (!(max_normal_angle_deg > 0 && max_normal_angle_deg <= 180)) return bad("max_normal_angle_deg must be in (0, 180]");
   if (max_iterations < 0 || max_iterations > 1000) return bad("max_iterations must be in 0..1000");
   if (!(tolerance >= 0)) return bad("tolerance must be >= 0 (0 = automatic)");
+  if (radius_steps < 0 || radius_steps > 100) return bad("radius_steps must be in 0..100");
+  if (freeze_iteration < 0) return bad("freeze_iteration must be >= 0 (0 = when r reaches max_match_distance)");
+  if (!(relaxation >= 1 && relaxation < 2)) return bad("relaxation must be in [1, 2)");
   if (!(rim_rejection > 0 && rim_rejection <= 1)) return bad("rim_rejection must be in (0, 1]");
   if (!(marker_weight > 0) || !(match_weight > 0) || !(propagation_weight > 0) || !(updating_match_weight > 0))
     return bad("weights must be > 0");
@@ -244,14 +247,22 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       // (§5.2). Iterated to the self-consistent value: the re-solved shape with scale λ has
       // geodesic ratio λ (the thesis does one step; data far out of scale needs a few).
       std::vector<int> dm(distinct.begin(), distinct.end());
-      const Eigen::MatrixXd D0 = geodesic_distance_matrix(templ.V, templ.F, dm);  // computed once
+      // rest-pose geodesics between the markers: the rotation field's skeleton has them already
+      const ConstraintGraph* graph = D.rotationGraph();
+      const Eigen::MatrixXd D0 = graph && graph->nodes == dm ? graph->geodesic : geodesic_distance_matrix(templ.V, templ.F, dm);
+      // the shortest paths between the markers are searched once, on the first posed shape; the
+      // later rounds re-measure the same curves on the re-solved shape (a uniform rescale keeps
+      // them shortest; the search is the expensive part)
+      std::vector<std::vector<std::vector<int>>> paths;
       auto ratio_of = [&](const Eigen::MatrixX3d& X) {
-        const Eigen::MatrixXd D1 = geodesic_distance_matrix(X, templ.F, dm);
+        if (paths.empty()) paths = geodesic_paths(X, templ.F, dm);
         double sum = 0;
         int cnt = 0;
         for (Eigen::Index a = 0; a < D0.rows(); ++a)
-          for (Eigen::Index b = a + 1; b < D0.cols(); ++b)
-            if (std::isfinite(D0(a, b)) && std::isfinite(D1(a, b)) && D0(a, b) > 0) { sum += D1(a, b) / D0(a, b); ++cnt; }
+          for (Eigen::Index b = a + 1; b < D0.cols(); ++b) {
+            const auto& path = paths[std::size_t(a)][std::size_t(b)];
+            if (std::isfinite(D0(a, b)) && D0(a, b) > 0 && !path.empty()) { sum += path_length(X, path) / D0(a, b); ++cnt; }
+          }
         return cnt ? sum / cnt : std::numeric_limits<double>::quiet_NaN();
       };
       for (int k = 0; k < 8; ++k) {
@@ -290,15 +301,38 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   Eigen::MatrixX3d target = V;
   std::vector<int> frozen_ids;     // constraint id per vertex while the set is frozen (-1: none)
   Eigen::MatrixX3d frozen_target;
+  std::vector<double> frozen_moves;  // 99th percentile moves of the frozen iterations
+  // displacement propagation inside the frozen iterations (see stage 3)
+  HarmonicInterpolator prop_harmonic;
+  std::vector<int> prop_ids;        // per vertex: id of its propagated constraint (-1: none)
+  std::vector<int> prop_sources;    // the matched vertices the interpolation starts from
+  Eigen::MatrixX3d N0;              // normals of the initial deformation
+  bool propagate_in_loop = false;
+  // normal displacements of the matched vertices relative to the initial deformation,
+  // harmonically interpolated, as targets of the unmatched ones (§5.3 end)
+  auto propagated_targets = [&](const Eigen::MatrixX3d& X) {
+    Eigen::MatrixXd d(Eigen::Index(prop_sources.size()), 1);
+    for (std::size_t k = 0; k < prop_sources.size(); ++k)
+      d(Eigen::Index(k), 0) = (X.row(prop_sources[k]) - V0.row(prop_sources[k])).dot(N0.row(prop_sources[k]));
+    const Eigen::MatrixXd dense = prop_harmonic.interpolate(d);
+    Eigen::MatrixX3d T = V0;
+    for (Eigen::Index j = 0; j < V0.rows(); ++j) T.row(j) += dense(j, 0) * N0.row(j);
+    return T;
+  };
   bool converged = false;
   const auto t_it = Clock::now();
   for (int it = 1; it <= u.max_iterations; ++it) {
     const auto t_iter = Clock::now();
     report_progress(progress, 0.1 + 0.75 * double(it - 1) / std::max(u.max_iterations, 1), "matching");
-    const double frac = std::min(1.0, double(it - 1) / 3.0);
+    const int rsteps = u.radius_steps;
+    const int freeze_it = u.freeze_iteration > 0 ? u.freeze_iteration : std::max(1, rsteps);
+    const double frac = rsteps > 0 ? std::min(1.0, double(it - 1) / rsteps) : 1.0;
     const double r = u.initial_match_distance * std::pow(u.max_match_distance / u.initial_match_distance, frac);
     auto tm = Clock::now();
     const Eigen::MatrixX3d VN = vertex_normals(V, F);
+    // in the frozen phase (see below) only the frozen set is matched
+    const bool frozen_phase = u.freeze_constraints && it >= freeze_it && !u.laplacian_updating && !u.remeshing &&
+                              !frozen_ids.empty();
     const std::vector<char> prev_matched = matched;
     std::fill(matched.begin(), matched.end(), 0);
     matched.resize(std::size_t(V.rows()), 0);
@@ -310,6 +344,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
 #pragma omp for schedule(dynamic, 256)
       for (Eigen::Index j = 0; j < V.rows(); ++j) {
         if (masked[std::size_t(j)]) continue;
+        if (frozen_phase && frozen_ids[std::size_t(j)] < 0) continue;  // cannot join the frozen set
         const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
         if (nj.squaredNorm() == 0) continue;
         // expanding search: the scheduled radius first (precision), then doubled up to the
@@ -402,11 +437,11 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         // a component without nodes: keep the previous field
       }
     }
-    // Once the radius schedule is done (and without Laplacian updating / remeshing, which change
-    // the system anyway), the constrained set and weights are frozen: later iterations only move
+    // From freeze_iteration on (and without Laplacian updating / remeshing, which change the
+    // system anyway), the constrained set and weights are frozen: later iterations only move
     // targets, i.e. one back-substitution instead of a factorization, and vertices can no longer
     // flicker in and out of the system. A frozen vertex that finds no match keeps its last target.
-    const bool freeze = u.freeze_constraints && frac >= 1.0 && !u.laplacian_updating && !u.remeshing;
+    const bool freeze = u.freeze_constraints && it >= freeze_it && !u.laplacian_updating && !u.remeshing;
     if (freeze && !frozen_ids.empty()) {
       for (Eigen::Index j = 0; j < V.rows(); ++j) {
         const int id = frozen_ids[std::size_t(j)];
@@ -421,6 +456,13 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
       for (Eigen::Index j = 0; j < V.rows(); ++j)
         if (frozen_ids[std::size_t(j)] < 0) matched[std::size_t(j)] = 0;
+      if (propagate_in_loop) {
+        const auto tp = Clock::now();
+        const Eigen::MatrixX3d T = propagated_targets(V);
+        for (Eigen::Index j = 0; j < V.rows(); ++j)
+          if (prop_ids[std::size_t(j)] >= 0) D.setPositionTarget(prop_ids[std::size_t(j)], T.row(j).transpose());
+        rep.t_propagation += since(tp);
+      }
     } else {
       D.clearConstraints();
       add_markers(D);
@@ -431,6 +473,35 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
                                                                w_data * std::sqrt(match_scale(j)));
       frozen_target = target;
       if (!freeze) frozen_ids.clear();
+      // Once frozen, the propagated constraints of §5.3 join the system right away (their
+      // targets follow the matched displacements each iteration): the final system of the
+      // thesis — matched + propagated constraints — is then the frozen one, factorized once,
+      // instead of a separate propagation solve with a factorization of its own.
+      if (freeze && u.propagate_displacements) {
+        const auto tp = Clock::now();
+        prop_sources.clear();
+        bool any_unmatched = false;
+        for (Eigen::Index j = 0; j < V.rows(); ++j) {
+          if (matched[std::size_t(j)]) prop_sources.push_back(int(j));
+          else if (!masked[std::size_t(j)]) any_unmatched = true;
+        }
+        prop_ids.assign(std::size_t(V.rows()), -1);
+        if (!prop_sources.empty() && any_unmatched) {
+          try {
+            N0 = vertex_normals(V0, F);
+            prop_harmonic.compute(V0, F, prop_sources);
+            const Eigen::MatrixX3d T = propagated_targets(V);
+            for (Eigen::Index j = 0; j < V.rows(); ++j)
+              if (!matched[std::size_t(j)] && !masked[std::size_t(j)])
+                prop_ids[std::size_t(j)] = D.addPositionConstraint(SurfacePoint::atVertex(int(j)), T.row(j).transpose(),
+                                                                   u.propagation_weight);
+          } catch (const InvalidInput&) {
+            rep.message += "displacement propagation skipped (a mesh component has no matched vertex). ";
+          }
+        }
+        propagate_in_loop = true;  // done here (or skipped for good), not again in stage 3
+        rep.t_propagation += since(tp);
+      }
     }
     const Eigen::MatrixX3d Vn = D.deform();
     rep.t_solve += since(tm);
@@ -456,7 +527,22 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       logger()->trace("[TemplateFitting] it {} max matched move {:.4f}% at vertex {} (target dist {:.4f}%), #moving>0.1%d {}", it,
                       100 * move / diag, arg, 100 * (target.row(arg) - V.row(arg)).norm() / diag, (moves.array() > 1e-3 * diag).count());
     }
-    V = Vn;
+    // stop: the 99th percentile move is below the tolerance, or it has stalled near it (a few
+    // vertices cycling through their own normals or in and out of thin parts: no progress is
+    // being made, more iterations only cost time)
+    const bool in_freeze = freeze && !frozen_ids.empty();
+    bool stop = move < u.tolerance && frac >= 1.0;
+    bool stalled = false;
+    if (!stop && in_freeze && frac >= 1.0 && frozen_moves.size() >= 3 && move < 5 * u.tolerance) {
+      const double best = std::min(frozen_moves[frozen_moves.size() - 1], frozen_moves[frozen_moves.size() - 2]);
+      stalled = stop = move > 0.95 * best;
+    }
+    if (in_freeze) frozen_moves.push_back(move);
+    // frozen iterations are a linear solve after a projection: over-relaxing the step speeds up
+    // the slow creep of the fixed point; the last step is never relaxed (the output solves the
+    // system)
+    if (in_freeze && !stop && it < u.max_iterations && u.relaxation != 1.0) V += u.relaxation * (Vn - V);
+    else V = Vn;
     bool remeshed = false;
     if (u.remeshing && V.rows() < u.max_vertices && it >= 2 && it < u.max_iterations) {
       tm = Clock::now();
@@ -539,7 +625,13 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     rep.history.push_back({it, r, n_matched, move, since(t_iter)});
     rep.iterations = it;
     logger()->debug("[TemplateFitting] iteration {}: r={:.4g}, matched {}, max move {:.3g}", it, r, n_matched, move);
-    if (move < u.tolerance && !remeshed && frac >= 1.0) { converged = true; break; }
+    if (stop && !remeshed) {
+      converged = true;
+      if (stalled)
+        rep.message += "converged: the 99th percentile move stalled at " + std::to_string(move) + " (tolerance " +
+                       std::to_string(u.tolerance) + "). ";
+      break;
+    }
   }
   rep.t_iterations = since(t_it);
   if (!converged && u.max_iterations > 0) {
@@ -553,7 +645,10 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     if (masked[std::size_t(j)]) status[std::size_t(j)] = VertexStatus::Masked;
     else if (matched[std::size_t(j)]) status[std::size_t(j)] = VertexStatus::Matched;
   }
-  if (u.propagate_displacements && u.max_iterations > 0) {
+  if (propagate_in_loop) {
+    for (Eigen::Index j = 0; j < V.rows(); ++j)
+      if (j < Eigen::Index(prop_ids.size()) && prop_ids[std::size_t(j)] >= 0) status[std::size_t(j)] = VertexStatus::Propagated;
+  } else if (u.propagate_displacements && u.max_iterations > 0) {
     t0 = Clock::now();
     report_progress(progress, 0.88, "propagation");
     std::vector<int> m_idx;
@@ -561,7 +656,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       if (status[std::size_t(j)] == VertexStatus::Matched) m_idx.push_back(int(j));
     const bool any_unmatched = std::any_of(status.begin(), status.end(), [](VertexStatus s) { return s == VertexStatus::Unmatched; });
     if (!m_idx.empty() && any_unmatched) {
-      const Eigen::MatrixX3d N0 = vertex_normals(V0, F);
+      N0 = vertex_normals(V0, F);
       Eigen::MatrixXd d(Eigen::Index(m_idx.size()), 1);
       for (std::size_t k = 0; k < m_idx.size(); ++k)
         d(Eigen::Index(k), 0) = (V.row(m_idx[k]) - V0.row(m_idx[k])).dot(N0.row(m_idx[k]));
@@ -596,18 +691,23 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // umbrella smoothing steps until none is left (at most 30 rounds)
   auto flipped_faces = [&](const Eigen::MatrixX3d& X, std::vector<char>* mark) {
     const Eigen::MatrixX3d FN = face_normals(X, F);
-    int flipped = 0;
-    if (mark) mark->assign(std::size_t(X.rows()), 0);
+    std::vector<char> is_flipped(std::size_t(F.rows()), 0);
+#pragma omp parallel for schedule(dynamic, 1024)
     for (Eigen::Index f = 0; f < F.rows(); ++f) {
       const Eigen::Vector3d c = (X.row(F(f, 0)) + X.row(F(f, 1)) + X.row(F(f, 2))).transpose() / 3.0;
       double d2 = 0;
       const Eigen::Index k = search.nearest(c, &d2);
-      if (k >= 0 && roi_ok[std::size_t(k)] && d2 < u.max_match_distance * u.max_match_distance && FN.row(f).dot(N.row(k)) < -0.5) {
+      is_flipped[std::size_t(f)] = k >= 0 && roi_ok[std::size_t(k)] && d2 < u.max_match_distance * u.max_match_distance &&
+                                   FN.row(f).dot(N.row(k)) < -0.5;
+    }
+    int flipped = 0;
+    if (mark) mark->assign(std::size_t(X.rows()), 0);
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+      if (is_flipped[std::size_t(f)]) {
         ++flipped;
         if (mark)
           for (int q = 0; q < 3; ++q) (*mark)[std::size_t(F(f, q))] = 1;
       }
-    }
     return flipped;
   };
   auto folded_edges = [&](const Eigen::MatrixX3d& X, std::vector<char>* mark) {

@@ -45,9 +45,11 @@ Eigen::VectorXd dijkstra_distances(const Eigen::MatrixX3d& V, const std::vector<
 namespace {
 /// Dijkstra from one source that stops once every target is settled: distances at the targets.
 std::vector<double> dijkstra_to_targets(const Eigen::MatrixX3d& V, const std::vector<std::vector<int>>& adjacency, int source,
-                                        const std::vector<int>& targets, std::vector<int>& target_slot) {
+                                        const std::vector<int>& targets, std::vector<int>& target_slot,
+                                        std::vector<int>* predecessor = nullptr) {
   const double inf = std::numeric_limits<double>::infinity();
   std::vector<double> d(static_cast<std::size_t>(V.rows()), inf);
+  if (predecessor) predecessor->assign(static_cast<std::size_t>(V.rows()), -1);
   using Item = std::pair<double, int>;
   std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
   d[static_cast<std::size_t>(source)] = 0;
@@ -67,6 +69,7 @@ std::vector<double> dijkstra_to_targets(const Eigen::MatrixX3d& V, const std::ve
       const double nd = du + (V.row(u) - V.row(v)).norm();
       if (nd < d[static_cast<std::size_t>(v)]) {
         d[static_cast<std::size_t>(v)] = nd;
+        if (predecessor) (*predecessor)[static_cast<std::size_t>(v)] = u;
         heap.emplace(nd, v);
       }
     }
@@ -105,6 +108,38 @@ Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen:
   }
   if (cancelled) throw Cancelled("cancelled during 'geodesics'");
   return 0.5 * (D + D.transpose());
+}
+
+std::vector<std::vector<std::vector<int>>> geodesic_paths(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
+                                                         const std::vector<int>& vertices) {
+  const auto adj = vertex_adjacency(F, V.rows());
+  const int k = int(vertices.size());
+  for (int v : vertices)
+    if (v < 0 || v >= V.rows())
+      throw InvalidInput("[tbsp::geodesic_paths] vertex " + std::to_string(v) + " is out of range (mesh has " +
+                         std::to_string(V.rows()) + " vertices)");
+  std::vector<int> slot(static_cast<std::size_t>(V.rows()), -1);
+  for (int b = k - 1; b >= 0; --b) slot[std::size_t(vertices[std::size_t(b)])] = b;
+  std::vector<std::vector<std::vector<int>>> paths(static_cast<std::size_t>(k));
+  for (auto& row : paths) row.resize(static_cast<std::size_t>(k));
+#pragma omp parallel for schedule(dynamic)
+  for (int a = 0; a < k; ++a) {
+    std::vector<int> pred;
+    const std::vector<double> d = dijkstra_to_targets(V, adj, vertices[std::size_t(a)], vertices, slot, &pred);
+    for (int b = 0; b < k; ++b) {
+      if (!std::isfinite(d[std::size_t(b)]) || vertices[std::size_t(b)] == vertices[std::size_t(a)]) continue;
+      std::vector<int>& path = paths[std::size_t(a)][std::size_t(b)];
+      for (int v = vertices[std::size_t(b)]; v >= 0; v = pred[std::size_t(v)]) path.push_back(v);
+      std::reverse(path.begin(), path.end());
+    }
+  }
+  return paths;
+}
+
+double path_length(const Eigen::MatrixX3d& V, const std::vector<int>& path) {
+  double len = 0;
+  for (std::size_t i = 1; i < path.size(); ++i) len += (V.row(path[i]) - V.row(path[i - 1])).norm();
+  return len;
 }
 
 double global_scale_from_geodesics(const Eigen::MatrixX3d& V_reference, const Eigen::MatrixX3d& V_deformed,

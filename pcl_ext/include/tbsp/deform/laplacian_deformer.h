@@ -51,6 +51,8 @@
 
 namespace tbsp {
 
+struct ConstraintGraph;
+
 /// \brief A point on the mesh: a vertex, or a face with barycentric coordinates.
 struct SurfacePoint {
   int vertex = -1;                          ///< >= 0: this vertex
@@ -154,6 +156,11 @@ public:
   void setRotations(const std::vector<Eigen::Matrix3d>& R);
   /// The per-vertex rotations used by the last deform() (empty if none).
   const std::vector<Eigen::Matrix3d>& lastRotations() const { return last_rotations_; }
+  /// \brief The constraint skeleton of the automatic rotation field (nodes in ascending vertex
+  /// order, their Dijkstra distance matrix on the rest mesh), or nullptr before the first
+  /// deform() with the field on / after the constraint set changed. Lets callers reuse the
+  /// geodesics (e.g. the §5.2 scale estimate) instead of computing them again.
+  const ConstraintGraph* rotationGraph() const;
 
   /// \brief Global scale λ applied to the differential coordinates (§5.2). Default 1.
   void setScale(double lambda);

@@ -71,6 +71,10 @@ struct FitParameters {
   /// neighbourhoods; unbiased at the rim of the data and on one-sided neighbourhoods).
   bool plane_fit = true;
   int max_iterations = 15;
+  /// r_max shrinks geometrically from initial_match_distance to max_match_distance over this
+  /// many iterations (coarse-to-fine; 0: r_max from the start). Two steps are faster (one
+  /// factorization less) but let misregistered fragments pull a fold into the fit.
+  int radius_steps = 3;
   double tolerance = 0;                 ///< stop when the 99th percentile of matched-vertex moves < tol; 0: 2e-4 d
   double marker_weight = 10;            ///< w of marker constraints
   double match_weight = 1;              ///< w of data constraints (§5.3)
@@ -86,6 +90,15 @@ struct FitParameters {
   /// Once r has reached r_max, keep the constrained vertex set and weights fixed and only move the
   /// targets: iterations cost a back-substitution instead of a factorization.
   bool freeze_constraints = true;
+  /// Iteration at which the set is frozen; 0: the iteration before r reaches r_max
+  /// (= radius_steps, at least 1): three factorizations in all with the defaults. Vertices that
+  /// only find data at the final radius are then filled by displacement propagation.
+  int freeze_iteration = 0;
+  /// Over-relaxation ω of the frozen iterations (x ← x + ω (solve − x); 1: none). The targets
+  /// of the matching creep towards the data by a roughly constant fraction per iteration;
+  /// ω = 1.5 reaches the tolerance in about two thirds of the iterations. Never applied to
+  /// the last step.
+  double relaxation = 1.5;
   bool laplacian_updating = false;      ///< §5.5.1
   double updating_match_weight = 0.5;   ///< data weight with Laplacian updating
   bool remeshing = false;               ///< §5.5.2 (needs laplacian_updating; changes connectivity)

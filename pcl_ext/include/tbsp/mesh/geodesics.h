@@ -25,6 +25,18 @@ Eigen::VectorXd dijkstra_distances(const Eigen::MatrixX3d& V, const std::vector<
 Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                                          const std::vector<int>& vertices, const ProgressCallback& progress = {});
 
+/// \brief The Dijkstra shortest edge paths between every pair of the given vertices:
+/// paths[a][b] runs from vertices[a] to vertices[b] (both included); empty when a and b are the
+/// same vertex or lie on different components. Lets a caller re-measure the same curves on
+/// another pose of the mesh with path_length() instead of searching again (§5.2 scale
+/// iteration). O(k (#V + #E) log #V) time, O(k² · path length) memory.
+/// \throws InvalidInput if an index is out of range.
+std::vector<std::vector<std::vector<int>>> geodesic_paths(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
+                                                         const std::vector<int>& vertices);
+
+/// \brief Length of a vertex path (sum of its edge lengths) on the positions V. O(path length).
+double path_length(const Eigen::MatrixX3d& V, const std::vector<int>& path);
+
 /// \brief Global scale factor of §5.2: the mean, over all pairs of marked vertices joined by a
 /// path, of the ratio of their Dijkstra distances on `V_deformed` to those on `V_reference`
 /// (both with connectivity F). λ > 1 means the deformed shape is larger.
