@@ -55,7 +55,10 @@ TEST(SphereToRealScan, IgeaWithUpdatingRemeshingFairing) {
               "faces opposing the true normals %d of %ld\n",
               (long)r.vertices, r.iterations, r.t_total, 100 * r.hausdorff_rel, 100 * r.p99 / r.bbox_diagonal,
               100 * r.rms / r.bbox_diagonal, r.folded_edges, opposing, (long)fit.F.rows());
-  EXPECT_LE(r.hausdorff_rel, 0.005);                       // issue target; measured 0.42 %
+  // issue target; measured 0.42 % with OpenBLAS's default threads on 2 cores. Fragile: the
+  // updating + remeshing path amplifies rounding — OPENBLAS_NUM_THREADS=1 gives 2.6 % here
+  // (docs/fitting.md, "Not reached yet")
+  EXPECT_LE(r.hausdorff_rel, 0.005);
   EXPECT_EQ(r.folded_edges, 0);                            // no edge folded back by > 120°
   EXPECT_LT(double(opposing) / double(fit.F.rows()), 0.01);  // issue target 0: measured 0.34 %
 }

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <numeric>
+#include <optional>
 #include <set>
 #include <unordered_map>
 
@@ -20,6 +21,7 @@
 #include "tbsp/mesh/point_search.h"
 #include "tbsp/mesh/remeshing.h"
 #include "tbsp/mesh/topology.h"
+#include "tbsp/solve/blas_threads.h"
 #include "tbsp/solve/harmonic.h"
 
 namespace tbsp {
@@ -91,6 +93,12 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
                        bool orient_normals) {
   const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
   const auto t_all = Clock::now();
+  // one BLAS thread: no contention with our OpenMP loops (blas_threads.h). Not with Laplacian
+  // updating / remeshing: that path is sensitive to the last bit of rounding (a different BLAS
+  // thread count changes which faces get subdivided; docs/fitting.md) and keeps the caller's
+  // BLAS setting.
+  std::optional<ScopedBlasThreads> blas_threads;
+  if (!params.laplacian_updating && !params.remeshing) blas_threads.emplace(1);
   FitReport rep;
   std::string why;
   if (!params.isValid(&why)) throw InvalidInput(who + "invalid parameters: " + why);

@@ -43,13 +43,32 @@ Eigen::VectorXd dijkstra_distances(const Eigen::MatrixX3d& V, const std::vector<
 }
 
 namespace {
+/// The edge graph in compressed rows with the edge lengths precomputed: the Dijkstra loop then
+/// reads contiguous memory instead of gathering vertex rows (column-major V) per relaxation.
+struct EdgeGraph {
+  std::vector<int> start, to;
+  std::vector<double> length;
+  EdgeGraph(const Eigen::MatrixX3d& V, const std::vector<std::vector<int>>& adjacency) {
+    start.assign(adjacency.size() + 1, 0);
+    for (std::size_t u = 0; u < adjacency.size(); ++u) start[u + 1] = start[u] + int(adjacency[u].size());
+    to.resize(std::size_t(start.back()));
+    length.resize(std::size_t(start.back()));
+    for (std::size_t u = 0; u < adjacency.size(); ++u)
+      for (std::size_t k = 0; k < adjacency[u].size(); ++k) {
+        const int v = adjacency[u][k];
+        to[std::size_t(start[u]) + k] = v;
+        length[std::size_t(start[u]) + k] = (V.row(Eigen::Index(u)) - V.row(v)).norm();
+      }
+  }
+};
+
 /// Dijkstra from one source that stops once every target is settled: distances at the targets.
-std::vector<double> dijkstra_to_targets(const Eigen::MatrixX3d& V, const std::vector<std::vector<int>>& adjacency, int source,
-                                        const std::vector<int>& targets, std::vector<int>& target_slot,
-                                        std::vector<int>* predecessor = nullptr) {
+std::vector<double> dijkstra_to_targets(const EdgeGraph& g, int source, const std::vector<int>& targets,
+                                        std::vector<int>& target_slot, std::vector<int>* predecessor = nullptr) {
   const double inf = std::numeric_limits<double>::infinity();
-  std::vector<double> d(static_cast<std::size_t>(V.rows()), inf);
-  if (predecessor) predecessor->assign(static_cast<std::size_t>(V.rows()), -1);
+  const std::size_t n = g.start.size() - 1;
+  std::vector<double> d(n, inf);
+  if (predecessor) predecessor->assign(n, -1);
   using Item = std::pair<double, int>;
   std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
   d[static_cast<std::size_t>(source)] = 0;
@@ -65,8 +84,9 @@ std::vector<double> dijkstra_to_targets(const Eigen::MatrixX3d& V, const std::ve
       settled[static_cast<std::size_t>(slot)] = 1;
       --left;
     }
-    for (int v : adjacency[std::size_t(u)]) {
-      const double nd = du + (V.row(u) - V.row(v)).norm();
+    for (int e = g.start[std::size_t(u)]; e < g.start[std::size_t(u) + 1]; ++e) {
+      const int v = g.to[std::size_t(e)];
+      const double nd = du + g.length[std::size_t(e)];
       if (nd < d[static_cast<std::size_t>(v)]) {
         d[static_cast<std::size_t>(v)] = nd;
         if (predecessor) (*predecessor)[static_cast<std::size_t>(v)] = u;
@@ -82,7 +102,7 @@ std::vector<double> dijkstra_to_targets(const Eigen::MatrixX3d& V, const std::ve
 
 Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                                          const std::vector<int>& vertices, const ProgressCallback& progress) {
-  const auto adj = vertex_adjacency(F, V.rows());
+  const EdgeGraph graph(V, vertex_adjacency(F, V.rows()));
   const int k = int(vertices.size());
   Eigen::MatrixXd D(k, k);
   for (int v : vertices)
@@ -98,7 +118,7 @@ Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen:
 #pragma omp parallel for schedule(dynamic)
   for (int a = 0; a < k; ++a) {
     if (cancelled) continue;
-    const std::vector<double> d = dijkstra_to_targets(V, adj, vertices[std::size_t(a)], vertices, slot);
+    const std::vector<double> d = dijkstra_to_targets(graph, vertices[std::size_t(a)], vertices, slot);
     for (int b = 0; b < k; ++b) D(a, b) = d[std::size_t(b)];
     const int n_done = ++done;
 #pragma omp critical
@@ -112,7 +132,7 @@ Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen:
 
 std::vector<std::vector<std::vector<int>>> geodesic_paths(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                                                          const std::vector<int>& vertices) {
-  const auto adj = vertex_adjacency(F, V.rows());
+  const EdgeGraph graph(V, vertex_adjacency(F, V.rows()));
   const int k = int(vertices.size());
   for (int v : vertices)
     if (v < 0 || v >= V.rows())
@@ -125,7 +145,7 @@ std::vector<std::vector<std::vector<int>>> geodesic_paths(const Eigen::MatrixX3d
 #pragma omp parallel for schedule(dynamic)
   for (int a = 0; a < k; ++a) {
     std::vector<int> pred;
-    const std::vector<double> d = dijkstra_to_targets(V, adj, vertices[std::size_t(a)], vertices, slot, &pred);
+    const std::vector<double> d = dijkstra_to_targets(graph, vertices[std::size_t(a)], vertices, slot, &pred);
     for (int b = 0; b < k; ++b) {
       if (!std::isfinite(d[std::size_t(b)]) || vertices[std::size_t(b)] == vertices[std::size_t(a)]) continue;
       std::vector<int>& path = paths[std::size_t(a)][std::size_t(b)];
