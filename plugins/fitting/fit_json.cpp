@@ -141,7 +141,9 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"plane_fit", u.plane_fit}, {"rotation_field", u.rotation_field}, {"estimate_scale", u.estimate_scale},
                      {"propagate_displacements", u.propagate_displacements}, {"refine_rotations", u.refine_rotations},
                      {"laplacian_updating", u.laplacian_updating}, {"remeshing", u.remeshing},
-                     {"subdivision_error", u.subdivision_error}, {"fairing", u.fairing}};
+                     {"subdivision_error", u.subdivision_error}, {"fairing", u.fairing},
+                     {"radius_steps", u.radius_steps}, {"freeze_constraints", u.freeze_constraints},
+                     {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation}};
   j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
                  {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},
                  {"vertices", r.vertices}, {"faces", r.faces}, {"matched", r.matched}, {"propagated", r.propagated},

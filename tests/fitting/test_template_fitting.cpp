@@ -150,6 +150,14 @@ TEST(TemplateFittingBadInput, ClearErrors) {
   FitParameters p;
   p.max_normal_angle_deg = -3;
   EXPECT_THROW(fit.setParameters(p), InvalidInput);
+  for (auto bad : {+[](FitParameters& q) { q.radius_steps = -1; }, +[](FitParameters& q) { q.freeze_iteration = -2; },
+                   +[](FitParameters& q) { q.relaxation = 0.5; }, +[](FitParameters& q) { q.relaxation = 2.0; }}) {
+    FitParameters q;
+    bad(q);
+    std::string why;
+    EXPECT_FALSE(q.isValid(&why));
+    EXPECT_THROW(fit.setParameters(q), InvalidInput) << why;
+  }
   // non-manifold template: fine for the Laplacian, rejected when remeshing is asked for
   FitParameters remesh;
   remesh.remeshing = true;

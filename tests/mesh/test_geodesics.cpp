@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
 #include "tbsp/core/error.h"
@@ -56,4 +57,37 @@ TEST(Geodesics, DistanceMatrixSymmetricAndInfiniteAcrossComponents) {
   int calls = 0;
   EXPECT_THROW(geodesic_distance_matrix(m.V, m.F, {0, 5}, [&](double, const std::string&) { return ++calls < 1; }),
                Cancelled);
+}
+
+TEST(Geodesics, PathsMatchTheDistancesAndRescaleExactly) {
+  const TriMesh m = make_tube(20, 10, 1.0, 0.2);
+  const std::vector<int> marks{0, 55, 120, 199};
+  const Eigen::MatrixXd D = geodesic_distance_matrix(m.V, m.F, marks);
+  const auto paths = geodesic_paths(m.V, m.F, marks);
+  ASSERT_EQ(paths.size(), marks.size());
+  const auto adj = vertex_adjacency(m.F, m.V.rows());
+  for (std::size_t a = 0; a < marks.size(); ++a)
+    for (std::size_t b = 0; b < marks.size(); ++b) {
+      const auto& p = paths[a][b];
+      if (a == b) { EXPECT_TRUE(p.empty()); continue; }
+      ASSERT_GE(p.size(), 2u);
+      EXPECT_EQ(p.front(), marks[a]);
+      EXPECT_EQ(p.back(), marks[b]);
+      for (std::size_t k = 1; k < p.size(); ++k)  // consecutive vertices share an edge
+        EXPECT_NE(std::find(adj[std::size_t(p[k - 1])].begin(), adj[std::size_t(p[k - 1])].end(), p[k]),
+                  adj[std::size_t(p[k - 1])].end());
+      EXPECT_NEAR(path_length(m.V, p), D(Eigen::Index(a), Eigen::Index(b)), 1e-9);
+      // a rigid motion + uniform scale multiplies the length of the same path exactly
+      const Eigen::MatrixX3d S = (2.5 * m.V).rowwise() + Eigen::RowVector3d(1, -2, 3);
+      EXPECT_NEAR(path_length(S, p), 2.5 * path_length(m.V, p), 1e-9);
+    }
+  // different components: no path
+  TriMesh a = make_icosphere(1), two;
+  two.V.resize(2 * a.V.rows(), 3);
+  two.V << a.V, (a.V.rowwise() + Eigen::RowVector3d(3, 0, 0));
+  two.F.resize(2 * a.F.rows(), 3);
+  two.F << a.F, (a.F.array() + int(a.V.rows())).matrix();
+  const auto p2 = geodesic_paths(two.V, two.F, {0, int(a.V.rows()) + 2});
+  EXPECT_TRUE(p2[0][1].empty());
+  EXPECT_THROW(geodesic_paths(m.V, m.F, {0, 100000}), InvalidInput);
 }
