@@ -379,13 +379,8 @@ void LaplacianDeformer::buildSystem() {
   // fast path (uncoupled): every constraint term falls on NL's pattern (a vertex, or vertices of
   // one face, which are neighbours in LᵀL), so N is NL with values added in place — no triplet
   // sort of the whole matrix on every re-weighting; falls back below if an entry is missing
-  if (!c.coupled) {
-    Eigen::SparseMatrix<double> N = NL;
-    N.makeCompressed();
-    // the constraint terms are summed first and NL added last, as the triplet path below does:
-    // bit-identical matrices whichever path runs
-    std::vector<double> add(std::size_t(N.nonZeros()), 0.0);
-    bool ok = true;
+  // every term w²·b_a·b_b of a scalar row between the free unknowns fa, fb; f returns false to stop
+  auto for_each_term = [&](auto&& f) {
     for (const auto& r : c.rows) {
       const double w2 = constraints_[std::size_t(r.cid)].weight * constraints_[std::size_t(r.cid)].weight;
       for (auto [va, ba] : r.stencil) {
@@ -393,27 +388,44 @@ void LaplacianDeformer::buildSystem() {
         if (fa < 0) continue;
         for (auto [vb, bb] : r.stencil) {
           const int fb = c.free_index[std::size_t(vb)];
-          if (fb < 0) continue;
-          const int* first = N.innerIndexPtr() + N.outerIndexPtr()[fb];
-          const int* last = N.innerIndexPtr() + N.outerIndexPtr()[fb + 1];
-          const int* at = std::lower_bound(first, last, fa);
-          if (at == last || *at != fa) { ok = false; break; }
-          add[std::size_t(at - N.innerIndexPtr())] += w2 * ba * bb;
+          if (fb >= 0 && !f(r, fa, fb, w2 * ba * bb)) return false;
         }
-        if (!ok) break;
       }
-      if (!ok) break;
     }
-    for (std::size_t k = 0; ok && k < add.size(); ++k) N.valuePtr()[k] = add[k] + N.valuePtr()[k];
+    return true;
+  };
+  // optional anchor ε‖x − V_rest‖² (setAnchor): keeps the factorization positive definite when
+  // a folded or degenerate mesh gives the Laplacian extra (near-)null vectors
+  auto factorize = [&](Eigen::SparseMatrix<double>& N) {
+    c.anchor = nf > 0 ? anchor_ * N.diagonal().cwiseAbs().mean() : 0.0;
+    if (c.anchor > 0)
+      for (Eigen::Index i = 0; i < N.rows(); ++i) N.coeffRef(i, i) += c.anchor;
+    report_progress(progress_, 0.3, "factorize");
+    const auto t0 = Clock::now();
+    if (nf > 0) c.solver.compute(N);
+    report_.t_factorize = seconds_since(t0);
+    c.matrix_valid = true;
+  };
+  // fast path (uncoupled): every constraint term falls on NL's pattern (a vertex, or vertices of
+  // one face, which are neighbours in LᵀL), so N is NL with values added in place — no triplet
+  // sort of the whole matrix on every re-weighting; falls back below if an entry is missing.
+  // The terms are summed first and NL added last, as the triplet path does: bit-identical
+  // matrices whichever path runs.
+  if (!c.coupled) {
+    Eigen::SparseMatrix<double> N = NL;
+    N.makeCompressed();
+    std::vector<double> add(std::size_t(N.nonZeros()), 0.0);
+    const bool ok = for_each_term([&](const ScalarRow&, int fa, int fb, double v) {
+      const int* first = N.innerIndexPtr() + N.outerIndexPtr()[fb];
+      const int* last = N.innerIndexPtr() + N.outerIndexPtr()[fb + 1];
+      const int* at = std::lower_bound(first, last, fa);
+      if (at == last || *at != fa) return false;
+      add[std::size_t(at - N.innerIndexPtr())] += v;
+      return true;
+    });
     if (ok) {
-      c.anchor = nf > 0 ? anchor_ * N.diagonal().cwiseAbs().mean() : 0.0;
-      if (c.anchor > 0)
-        for (Eigen::Index i = 0; i < nf; ++i) N.coeffRef(i, i) += c.anchor;
-      report_progress(progress_, 0.3, "factorize");
-      const auto t0 = Clock::now();
-      if (nf > 0) c.solver.compute(N);
-      report_.t_factorize = seconds_since(t0);
-      c.matrix_valid = true;
+      for (std::size_t k = 0; k < add.size(); ++k) N.valuePtr()[k] = add[k] + N.valuePtr()[k];
+      factorize(N);
       return;
     }
   }
@@ -425,36 +437,22 @@ void LaplacianDeformer::buildSystem() {
       for (int col = 0; col < NL.outerSize(); ++col)
         for (Eigen::SparseMatrix<double>::InnerIterator it(NL, col); it; ++it)
           t.emplace_back(int(d * nf + it.row()), int(d * nf + it.col()), it.value());
-  for (const auto& r : c.rows) {
-    const double w2 = constraints_[std::size_t(r.cid)].weight * constraints_[std::size_t(r.cid)].weight;
-    for (auto [va, ba] : r.stencil) {
-      const int fa = c.free_index[std::size_t(va)];
-      if (fa < 0) continue;
-      for (auto [vb, bb] : r.stencil) {
-        const int fb = c.free_index[std::size_t(vb)];
-        if (fb < 0) continue;
-        if (!c.coupled) { t.emplace_back(fa, fb, w2 * ba * bb); continue; }
-        for (int d1 = 0; d1 < 3; ++d1)
-          for (int d2 = 0; d2 < 3; ++d2) {
-            const double v = w2 * r.m(d1) * r.m(d2) * ba * bb;
-            if (v != 0) t.emplace_back(int(d1 * nf + fa), int(d2 * nf + fb), v);
-          }
-      }
+  for_each_term([&](const ScalarRow& r, int fa, int fb, double v) {
+    if (!c.coupled) {
+      t.emplace_back(fa, fb, v);
+      return true;
     }
-  }
+    for (int d1 = 0; d1 < 3; ++d1)
+      for (int d2 = 0; d2 < 3; ++d2) {
+        const double x = v * r.m(d1) * r.m(d2);
+        if (x != 0) t.emplace_back(int(d1 * nf + fa), int(d2 * nf + fb), x);
+      }
+    return true;
+  });
   Eigen::SparseMatrix<double> N(dims * nf, dims * nf);
   N.setFromTriplets(t.begin(), t.end());
   if (!c.coupled) N += NL;
-  // optional anchor ε‖x − V_rest‖² (setAnchor): keeps the factorization positive definite when
-  // a folded or degenerate mesh gives the Laplacian extra (near-)null vectors
-  c.anchor = nf > 0 ? anchor_ * N.diagonal().cwiseAbs().mean() : 0.0;
-  if (c.anchor > 0)
-    for (Eigen::Index i = 0; i < dims * nf; ++i) N.coeffRef(i, i) += c.anchor;
-  report_progress(progress_, 0.3, "factorize");
-  const auto t0 = Clock::now();
-  if (nf > 0) c.solver.compute(N);
-  report_.t_factorize = seconds_since(t0);
-  c.matrix_valid = true;
+  factorize(N);
 }
 
 Eigen::MatrixX3d LaplacianDeformer::rotatedDelta() {

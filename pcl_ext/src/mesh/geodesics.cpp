@@ -98,6 +98,18 @@ std::vector<double> dijkstra_to_targets(const EdgeGraph& g, int source, const st
   for (std::size_t t = 0; t < targets.size(); ++t) out[t] = d[static_cast<std::size_t>(targets[t])];
   return out;
 }
+
+/// Checks the vertex indices; vertex -> index in `vertices` (a repeated vertex: its first index;
+/// the others read the same distance because they are the same vertex), -1 elsewhere.
+std::vector<int> target_slots(Eigen::Index n, const std::vector<int>& vertices, const char* who) {
+  for (int v : vertices)
+    if (v < 0 || v >= n)
+      throw InvalidInput(std::string("[tbsp::") + who + "] vertex " + std::to_string(v) + " is out of range (mesh has " +
+                         std::to_string(n) + " vertices)");
+  std::vector<int> slot(static_cast<std::size_t>(n), -1);
+  for (int b = int(vertices.size()) - 1; b >= 0; --b) slot[std::size_t(vertices[std::size_t(b)])] = b;
+  return slot;
+}
 }  // namespace
 
 Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
@@ -105,14 +117,7 @@ Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen:
   const EdgeGraph graph(V, vertex_adjacency(F, V.rows()));
   const int k = int(vertices.size());
   Eigen::MatrixXd D(k, k);
-  for (int v : vertices)
-    if (v < 0 || v >= V.rows())
-      throw InvalidInput("[tbsp::geodesic_distance_matrix] vertex " + std::to_string(v) + " is out of range (mesh has " +
-                         std::to_string(V.rows()) + " vertices)");
-  // vertex -> index in `vertices` (a repeated vertex: its first index; the others read the same
-  // distance because they are the same vertex)
-  std::vector<int> slot(static_cast<std::size_t>(V.rows()), -1);
-  for (int b = k - 1; b >= 0; --b) slot[std::size_t(vertices[std::size_t(b)])] = b;
+  std::vector<int> slot = target_slots(V.rows(), vertices, "geodesic_distance_matrix");
   std::atomic<int> done{0};
   std::atomic<bool> cancelled{false};
 #pragma omp parallel for schedule(dynamic)
@@ -134,12 +139,7 @@ std::vector<std::vector<std::vector<int>>> geodesic_paths(const Eigen::MatrixX3d
                                                          const std::vector<int>& vertices) {
   const EdgeGraph graph(V, vertex_adjacency(F, V.rows()));
   const int k = int(vertices.size());
-  for (int v : vertices)
-    if (v < 0 || v >= V.rows())
-      throw InvalidInput("[tbsp::geodesic_paths] vertex " + std::to_string(v) + " is out of range (mesh has " +
-                         std::to_string(V.rows()) + " vertices)");
-  std::vector<int> slot(static_cast<std::size_t>(V.rows()), -1);
-  for (int b = k - 1; b >= 0; --b) slot[std::size_t(vertices[std::size_t(b)])] = b;
+  std::vector<int> slot = target_slots(V.rows(), vertices, "geodesic_paths");
   std::vector<std::vector<std::vector<int>>> paths(static_cast<std::size_t>(k));
   for (auto& row : paths) row.resize(static_cast<std::size_t>(k));
 #pragma omp parallel for schedule(dynamic)
