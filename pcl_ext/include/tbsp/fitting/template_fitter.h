@@ -11,9 +11,11 @@
 ///     deviate ≤ θ_max, averaged with the quadratic B-spline kernel, projected on the vertex
 ///     normal; weighted constraints; re-solve until the largest vertex move < tolerance;
 ///     r_max shrinks from `initial` to `final` over the first iterations (coarse-to-fine);
-///     (optionally refreshing the rotation field from the fit, see refine_rotations);
+///     (optionally refreshing the rotation field from the fit, see refine_rotations); then the
+///     constrained set is frozen: each further iteration is one back-substitution;
 ///  4. displacement propagation (§5.3 end): normal displacements of matched vertices relative to
-///     the initial deformation, harmonically interpolated to unmatched vertices, weight ½;
+///     the initial deformation, harmonically interpolated to unmatched vertices, weight ½ (with
+///     a frozen set these constraints join it and follow each iteration: no extra solve);
 ///  5. options (§5.5): Laplacian updating per iteration, adaptive 1-to-4 subdivision where the
 ///     per-triangle error exceeds ε (+ T-junction repair and valence flips), tangential
 ///     area-weighted fairing along the cloud normals (eq. 5.1-5.2).
