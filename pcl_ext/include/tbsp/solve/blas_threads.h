@@ -7,7 +7,9 @@
 /// the mesh systems of the fitting (tens of thousands of unknowns, small supernodes) the BLAS
 /// threads gain little and the contention costs ~8 % of a 43k-vertex fit on 2 cores, so the
 /// fitting runs with one BLAS thread. Found at run time (dlsym): without OpenBLAS, or with a
-/// BLAS that has no such call, this does nothing.
+/// BLAS that has no such call, this does nothing. The setting is process-wide: overlapping
+/// scopes in several threads (concurrent fits) restore in their own order, so the count after
+/// the last one ends may be 1; set it again with openblas_set_num_threads if that matters.
 namespace tbsp {
 
 class ScopedBlasThreads {
