@@ -1,6 +1,7 @@
 // Template fitting (thesis ch. 5): results in the form of Table 5.1 and the speed benchmark
 // against PCL's Poisson reconstruction on the same cloud.
-//   ./build/bench/bench_fit [--no-poisson] [--repeat N]
+//   ./build/bench/bench_fit [--no-poisson] [--repeat N] [--only WORD]
+// (--only: run just the rows whose model name contains WORD, e.g. armadillo)
 // Times are the median of N runs (default 3; this machine is shared and noisy); the 43k row
 // also prints where the time goes (median stage times).
 // Rows: real single-view scan (Stanford bunny bun000.ply, template libigl bunny.off, same frame),
@@ -71,19 +72,22 @@ double median_of(std::vector<FitReport> r, double FitReport::*field) {
 int main(int argc, char** argv) {
   bool poisson = true;
   int repeat = 3;
+  std::string only;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--no-poisson") poisson = false;
     else if (a == "--repeat" && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
+    else if (a == "--only" && i + 1 < argc) only = argv[++i];
     else {
-      std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N]\n");
+      std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N] [--only WORD]\n");
       return 2;
     }
   }
   std::printf("| model | #marks | #verts | #pts | Hausdorff/diag (ROI) | p99/diag | iters | time s | notes |\n");
   std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---|\n");
+  auto wanted = [&](const std::string& name) { return only.empty() || name.find(only) != std::string::npos; };
   // 1. real single-view scan
-  {
+  if (wanted("bunny, real scan bun000")) {
     const TriMesh t = read_mesh(kData + "/meshes/libigl__libigl-tutorial-data/bunny.off");
     const auto cloud = read_cloud_normals(kData + "/meshes/dengnantianjie__3dcoursework/bunny/data/bun000.ply");
     Eigen::MatrixX3d P(Eigen::Index(cloud->size()), 3);
@@ -119,6 +123,7 @@ int main(int argc, char** argv) {
   struct Case { const char* name; const char* path; int points; };
   for (const Case& c : {Case{"bunny GT: bend+twist+x2, hole 25%", "/meshes/libigl__libigl-tutorial-data/bunny.off", 30000},
                         Case{"armadillo GT: bend+twist+x2, hole 25%", "/meshes/libigl__libigl-tutorial-data/armadillo.obj", 100000}}) {
+    if (!wanted(c.name)) continue;
     const TriMesh t = read_mesh(kData + c.path);
     synth::ScenarioOptions o;
     o.points = c.points;

@@ -5,6 +5,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <chrono>
+#include <exception>
 #include <cmath>
 #include <map>
 #include <string>
@@ -16,6 +17,10 @@
 #include "tbsp/mesh/mesh_validation.h"
 #include "tbsp/mesh/topology.h"
 #include "tbsp/solve/sparse_cholesky.h"
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 namespace tbsp {
 
@@ -455,6 +460,35 @@ void LaplacianDeformer::buildSystem() {
   factorize(N);
 }
 
+void LaplacianDeformer::buildRotationGraph(bool with_progress) {
+  Cache& c = *cache_;
+  if (!user_rotations_.empty() || !use_rotation_field_ || c.graph_valid) return;
+  const auto t0 = Clock::now();
+  std::map<int, std::vector<int>> by_vertex;
+  for (std::size_t id = 0; id < constraints_.size(); ++id) {
+    const auto& con = constraints_[id];
+    if (con.type != ConstraintType::Position) continue;
+    int v = con.at.vertex;
+    if (v < 0) {
+      int k;
+      con.at.bary.maxCoeff(&k);
+      v = mesh_.F(con.at.face, k);
+    }
+    by_vertex[v].push_back(int(id));
+  }
+  std::vector<int> nodes;
+  c.node_constraints.clear();
+  for (auto& kv : by_vertex) { nodes.push_back(kv.first); c.node_constraints.push_back(kv.second); }
+  if (nodes.empty())
+    throw InvalidInput("[tbsp::LaplacianDeformer::deform] the rotation field needs position constraints (none set)");
+  ProgressCallback sub;
+  if (progress_ && with_progress) sub = [this](double f, const std::string& s) { return progress_(0.05 + 0.2 * f, s); };
+  c.graph = ConstraintGraph::build(mesh_.V, mesh_.F, nodes, 3, sub);
+  c.field.compute(mesh_.V, mesh_.F, nodes, c.graph.tree_parent, c.graph.tree_order, weights_);
+  c.graph_valid = true;
+  report_.t_graph = seconds_since(t0);
+}
+
 Eigen::MatrixX3d LaplacianDeformer::rotatedDelta() {
   Cache& c = *cache_;
   last_rotations_.clear();
@@ -463,32 +497,7 @@ Eigen::MatrixX3d LaplacianDeformer::rotatedDelta() {
   if (!user_rotations_.empty()) {
     last_rotations_ = user_rotations_;
   } else if (use_rotation_field_) {
-    const auto t0 = Clock::now();
-    if (!c.graph_valid) {
-      std::map<int, std::vector<int>> by_vertex;
-      for (std::size_t id = 0; id < constraints_.size(); ++id) {
-        const auto& con = constraints_[id];
-        if (con.type != ConstraintType::Position) continue;
-        int v = con.at.vertex;
-        if (v < 0) {
-          int k;
-          con.at.bary.maxCoeff(&k);
-          v = mesh_.F(con.at.face, k);
-        }
-        by_vertex[v].push_back(int(id));
-      }
-      std::vector<int> nodes;
-      c.node_constraints.clear();
-      for (auto& kv : by_vertex) { nodes.push_back(kv.first); c.node_constraints.push_back(kv.second); }
-      if (nodes.empty())
-        throw InvalidInput("[tbsp::LaplacianDeformer::deform] the rotation field needs position constraints (none set)");
-      ProgressCallback sub;
-      if (progress_) sub = [this](double f, const std::string& s) { return progress_(0.05 + 0.2 * f, s); };
-      c.graph = ConstraintGraph::build(mesh_.V, mesh_.F, nodes, 3, sub);
-      c.field.compute(mesh_.V, mesh_.F, nodes, c.graph.tree_parent, c.graph.tree_order, weights_);
-      c.graph_valid = true;
-    }
-    report_.t_graph = seconds_since(t0);
+    buildRotationGraph(true);
     const auto t1 = Clock::now();
     report_progress(progress_, 0.3, "rotations");
     const std::size_t k = c.graph.nodes.size();
@@ -552,7 +561,34 @@ Eigen::MatrixX3d LaplacianDeformer::deform() {
   report_.refactorized = !c.matrix_valid;
   if (!c.matrix_valid) {
     report_.t_graph = report_.t_factorize = 0;
+    const bool graph_too = user_rotations_.empty() && use_rotation_field_ && !c.graph_valid;
+#ifdef _OPENMP
+    if (graph_too && omp_get_max_threads() > 1 && !omp_in_parallel()) {
+      // the factorization and the rotation field's set-up (geodesics + a Laplacian system of
+      // their own) do not depend on each other: one thread each. Thread 0 is the caller's and
+      // reports progress; errors are rethrown in the sequential order.
+      std::exception_ptr err[2];
+#pragma omp parallel num_threads(2)
+      {
+        const bool both = omp_get_num_threads() < 2;
+        if (omp_get_thread_num() == 0) {
+          try { buildSystem(); } catch (...) { err[0] = std::current_exception(); }
+          if (both && !err[0]) {
+            try { buildRotationGraph(true); } catch (...) { err[1] = std::current_exception(); }
+          }
+        } else {
+          try { buildRotationGraph(false); } catch (...) { err[1] = std::current_exception(); }
+        }
+      }
+      for (const auto& e : err)
+        if (e) std::rethrow_exception(e);
+    } else {
+      buildSystem();
+    }
+#else
+    (void)graph_too;
     buildSystem();
+#endif
   }
   const Eigen::MatrixX3d d = rotatedDelta();
   report_progress(progress_, 0.8, "solve");

@@ -399,7 +399,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         matched[std::size_t(j)] = 1;
       }
     }
-    rep.t_matching += since(tm);
+    const double t_match_it = since(tm);
+    rep.t_matching += t_match_it;
     const Eigen::Index n_matched = std::count(matched.begin(), matched.end(), 1);
     if (logger()->should_log(spdlog::level::trace)) {
       Eigen::Index flips = 0;
@@ -512,7 +513,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
     }
     const Eigen::MatrixX3d Vn = D.deform();
-    rep.t_solve += since(tm);
+    const double t_solve_it = since(tm);
+    rep.t_solve += t_solve_it;
     const Eigen::VectorXd moves = (Vn - V).rowwise().norm();
     // convergence is judged on the data-supported vertices: unmatched regions (holes) are
     // floppy and keep swinging slowly as a whole while the matched ones have settled
@@ -630,7 +632,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
       rep.t_fairing += since(tm);
     }
-    rep.history.push_back({it, r, n_matched, move, since(t_iter)});
+    rep.history.push_back({it, r, n_matched, move, since(t_iter), t_match_it, t_solve_it});
     rep.iterations = it;
     logger()->debug("[TemplateFitting] iteration {}: r={:.4g}, matched {}, max move {:.3g}", it, r, n_matched, move);
     if (stop && !remeshed) {

@@ -193,6 +193,10 @@ private:
   void checkConstraint(const DeformConstraint& c, const char* who) const;
   void invalidateMatrix();
   void buildSystem();
+  /// Builds the rotation field's skeleton and interpolation system if the field is in use and
+  /// not built yet (nothing else). Independent of buildSystem(): deform() runs the two
+  /// concurrently when both are needed.
+  void buildRotationGraph(bool with_progress);
   void checkRank() const;
   Eigen::MatrixX3d rotatedDelta();
   Eigen::Vector3d evaluate(const SurfacePoint& p, const Eigen::MatrixX3d& X) const;

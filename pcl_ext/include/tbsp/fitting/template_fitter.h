@@ -123,6 +123,8 @@ struct FitIteration {
   Eigen::Index matched = 0;
   double max_move = 0;
   double seconds = 0;
+  double matching_seconds = 0;  ///< of `seconds`: the neighbour search and targets
+  double solve_seconds = 0;     ///< of `seconds`: system update, factorization (if any), solve
 };
 
 /// \brief Everything reconstruct() reports (also written as the JSON report of `tbsp fit`).
