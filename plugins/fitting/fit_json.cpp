@@ -138,7 +138,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"max_normal_angle_deg", u.max_normal_angle_deg}, {"max_iterations", u.max_iterations},
                      {"tolerance", u.tolerance}, {"marker_weight", u.marker_weight}, {"match_weight", u.match_weight},
                      {"propagation_weight", u.propagation_weight}, {"rim_rejection", u.rim_rejection},
-                     {"plane_fit", u.plane_fit}, {"rotation_field", u.rotation_field}, {"estimate_scale", u.estimate_scale},
+                     {"plane_fit", u.plane_fit}, {"binned_matching", u.binned_matching}, {"rotation_field", u.rotation_field}, {"estimate_scale", u.estimate_scale},
                      {"propagate_displacements", u.propagate_displacements}, {"refine_rotations", u.refine_rotations},
                      {"laplacian_updating", u.laplacian_updating}, {"remeshing", u.remeshing},
                      {"subdivision_error", u.subdivision_error}, {"fairing", u.fairing},

@@ -64,6 +64,59 @@ Eigen::MatrixX3d pca_normals(const PointSearch& tree, int k) {
   return N;
 }
 
+// The cloud summarised on a grid for matching at large radii: per (voxel, normal octant) bin
+// the point count, the sums of p and p pᵀ and the mean normal. The kernel-weighted mean and
+// covariance of §5.3 over a ball of radius r ≥ 4 h are then sums over bins (the kernel taken at
+// the bin centroid, exact within O((h/r)²)), at a fraction of the neighbour visits. The octant
+// split keeps the two sides of thin parts apart, so the normal test still works per bin.
+struct BinnedCloud {
+  Eigen::MatrixX3d centroid, normal, sum_p;
+  std::vector<Eigen::Matrix3d> sum_pp;
+  Eigen::VectorXd count;
+  PointSearch search;
+};
+
+BinnedCloud bin_cloud(const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N, const std::vector<char>& use, double h) {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300);
+  for (Eigen::Index i = 0; i < P.rows(); ++i)
+    if (use[std::size_t(i)]) lo = lo.cwiseMin(P.row(i).transpose());
+  std::unordered_map<std::uint64_t, int> bin_of;
+  bin_of.reserve(std::size_t(P.rows()));
+  std::vector<int> bin(std::size_t(P.rows()), -1);
+  int nb = 0;
+  for (Eigen::Index i = 0; i < P.rows(); ++i) {
+    if (!use[std::size_t(i)]) continue;
+    const Eigen::Vector3d c = ((P.row(i).transpose() - lo) / h).array().floor();
+    const std::uint64_t oct = (N(i, 0) < 0 ? 1u : 0u) | (N(i, 1) < 0 ? 2u : 0u) | (N(i, 2) < 0 ? 4u : 0u);
+    const std::uint64_t key = (std::uint64_t(c.x()) & 0x1FFFFF) | ((std::uint64_t(c.y()) & 0x1FFFFF) << 21) |
+                              ((std::uint64_t(c.z()) & 0x1FFFFF) << 42) | (oct << 61);
+    const auto [it, fresh] = bin_of.emplace(key, nb);
+    if (fresh) ++nb;
+    bin[std::size_t(i)] = it->second;
+  }
+  BinnedCloud b;
+  b.sum_p = Eigen::MatrixX3d::Zero(nb, 3);
+  b.normal = Eigen::MatrixX3d::Zero(nb, 3);
+  b.sum_pp.assign(std::size_t(nb), Eigen::Matrix3d::Zero());
+  b.count = Eigen::VectorXd::Zero(nb);
+  for (Eigen::Index i = 0; i < P.rows(); ++i) {
+    const int k = bin[std::size_t(i)];
+    if (k < 0) continue;
+    const Eigen::Vector3d p = P.row(i).transpose();
+    b.sum_p.row(k) += p.transpose();
+    b.sum_pp[std::size_t(k)] += p * p.transpose();
+    b.normal.row(k) += N.row(i);
+    b.count(k) += 1;
+  }
+  b.centroid = b.sum_p.array().colwise() / b.count.array();
+  for (Eigen::Index k = 0; k < nb; ++k) {
+    const double len = b.normal.row(k).norm();
+    if (len > 0) b.normal.row(k) /= len;
+  }
+  b.search = PointSearch(b.centroid);
+  return b;
+}
+
 }  // namespace
 
 bool FitParameters::isValid(std::string* why) const {
@@ -346,6 +399,13 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     matched.resize(std::size_t(V.rows()), 0);
     target = V;
     Eigen::VectorXd match_scale = Eigen::VectorXd::Ones(V.rows());
+    // large radius: match against the binned cloud (bins of r/3) when it has under half as
+    // many entries as the cloud (FitParameters::binned_matching)
+    std::optional<BinnedCloud> binned;
+    if (u.binned_matching && !frozen_phase && !u.laplacian_updating && !u.remeshing && r > u.max_match_distance) {
+      BinnedCloud b = bin_cloud(P, N, roi_ok, r / 3);
+      if (2 * b.count.rows() < np) binned = std::move(b);
+    }
 #pragma omp parallel
     {
       std::vector<std::pair<Eigen::Index, double>> nb;
@@ -361,22 +421,35 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         Eigen::Vector3d q;
         double used_r = r;
         for (double rr = r; rr <= u.initial_match_distance * 1.0001 && !found; rr *= 2) {
-          search.radius(vj, rr, nb);
-          double sw = 0;
+          double sw = 0, in_ball = 0;
           Eigen::Vector3d sp = Eigen::Vector3d::Zero();
           Eigen::Matrix3d spp = Eigen::Matrix3d::Zero();
-          for (const auto& [k, d2] : nb) {
-            if (!roi_ok[std::size_t(k)] || N.row(k).dot(nj) < cos_max) continue;
-            const double w = bspline_weight(std::sqrt(d2) / rr);
-            const Eigen::Vector3d pk = P.row(k).transpose();
-            sw += w;
-            sp += w * pk;
-            spp += w * pk * pk.transpose();
+          if (binned) {
+            binned->search.radius(vj, rr, nb);
+            for (const auto& [k, d2] : nb) {
+              in_ball += binned->count(k);
+              if (binned->normal.row(k).dot(nj) < cos_max) continue;
+              const double w = bspline_weight(std::sqrt(d2) / rr);
+              sw += w * binned->count(k);
+              sp += w * binned->sum_p.row(k).transpose();
+              spp += w * binned->sum_pp[std::size_t(k)];
+            }
+          } else {
+            search.radius(vj, rr, nb);
+            in_ball = double(nb.size());
+            for (const auto& [k, d2] : nb) {
+              if (!roi_ok[std::size_t(k)] || N.row(k).dot(nj) < cos_max) continue;
+              const double w = bspline_weight(std::sqrt(d2) / rr);
+              const Eigen::Vector3d pk = P.row(k).transpose();
+              sw += w;
+              sp += w * pk;
+              spp += w * pk * pk.transpose();
+            }
           }
           if (sw <= 0) continue;
           q = sp / sw;  // weighted average of §5.3
           const Eigen::Vector3d off = (q - vj) - (q - vj).dot(nj) * nj;
-          if (u.plane_fit && nb.size() >= 6) {
+          if (u.plane_fit && in_ball >= 6) {
             // weighted plane through q: the normal line of the vertex meets it at the projection
             // (unbiased for one-sided neighbourhoods at the rim of the data)
             Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(spp / sw - q * q.transpose());

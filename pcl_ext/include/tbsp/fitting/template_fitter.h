@@ -72,6 +72,14 @@ struct FitParameters {
   /// of the matched points instead of onto their weighted mean (same on symmetric
   /// neighbourhoods; unbiased at the rim of the data and on one-sided neighbourhoods).
   bool plane_fit = true;
+  /// Beyond the thesis: at large radii (the first coarse-to-fine steps) match against the cloud
+  /// summarised in bins of r/3 (per voxel and normal octant: count, Σp, Σppᵀ, mean normal)
+  /// instead of every point, when that has under half as many entries. The kernel-weighted
+  /// mean and plane are then sums over bins (kernel at the bin centroid); the final radius
+  /// always matches every point. 43k vertices / 100k points: iteration 1 matching 0.45 → 0.09 s,
+  /// same accuracy (docs/fitting.md). Not used with Laplacian updating / remeshing, whose
+  /// result depends on the exact early targets (see docs/fitting.md).
+  bool binned_matching = true;
   int max_iterations = 15;
   /// r_max shrinks geometrically from initial_match_distance to max_match_distance over this
   /// many iterations (coarse-to-fine; 0: r_max from the start). Two steps are faster (one
