@@ -59,6 +59,8 @@ struct LaplacianDeformer::Cache {
   Eigen::MatrixX3d X0;          // fixed positions (hard targets / isolated rest), 0 elsewhere
   Eigen::SparseMatrix<double> L_free;  // L̂ restricted to free columns (#V by n_free)
   Eigen::SparseMatrix<double> NL;      // L_freeᵀ L_free, cached while the free set is unchanged
+  Eigen::SparseMatrix<double> N_work;  // the fast path's normal matrix (NL's pattern), reused
+  std::vector<double> add_work;        // its constraint terms
   std::vector<int> nl_free_index;      // free set NL was built for (empty = invalid)
   std::vector<ScalarRow> rows;  // coupled: every scalar row; uncoupled: one row per position constraint
   double anchor = 0;            // ε of the anchor term
@@ -354,6 +356,7 @@ void LaplacianDeformer::buildSystem() {
     c.NL = sorted;
     c.NL.makeCompressed();
     c.nl_free_index = c.free_index;
+    c.N_work.resize(0, 0);
   }
   // scalar rows
   c.coupled = false;
@@ -417,9 +420,17 @@ void LaplacianDeformer::buildSystem() {
   // The terms are summed first and NL added last, as the triplet path does: bit-identical
   // matrices whichever path runs.
   if (!c.coupled) {
-    Eigen::SparseMatrix<double> N = NL;
-    N.makeCompressed();
-    std::vector<double> add(std::size_t(N.nonZeros()), 0.0);
+    // N and the term buffer live in the cache: re-weightings overwrite them instead of
+    // allocating (and page-faulting) tens of MB each time
+    Eigen::SparseMatrix<double>& N = c.N_work;
+    if (N.rows() != NL.rows() || N.nonZeros() != NL.nonZeros()) {
+      N = NL;
+      N.makeCompressed();
+    } else {
+      std::copy(NL.valuePtr(), NL.valuePtr() + NL.nonZeros(), N.valuePtr());
+    }
+    std::vector<double>& add = c.add_work;
+    add.assign(std::size_t(N.nonZeros()), 0.0);
     const bool ok = for_each_term([&](const ScalarRow&, int fa, int fb, double v) {
       const int* first = N.innerIndexPtr() + N.outerIndexPtr()[fb];
       const int* last = N.innerIndexPtr() + N.outerIndexPtr()[fb + 1];

@@ -588,6 +588,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     const Eigen::MatrixX3d Vn = D.deform();
     const double t_solve_it = since(tm);
     rep.t_solve += t_solve_it;
+    logger()->trace("[TemplateFitting] it {} solve {:.3f} s: factorize {:.3f}, back-substitution {:.3f}, rotations {:.3f}", it,
+                    t_solve_it, D.report().t_factorize, D.report().t_solve, D.report().t_rotations);
     const Eigen::VectorXd moves = (Vn - V).rowwise().norm();
     // convergence is judged on the data-supported vertices: unmatched regions (holes) are
     // floppy and keep swinging slowly as a whole while the matched ones have settled

@@ -81,8 +81,13 @@ void SparseCholesky::compute(const Eigen::SparseMatrix<double>& A_in) {
   if (A_in.rows() != A_in.cols())
     throw InvalidInput("[tbsp::SparseCholesky::compute] matrix is " + std::to_string(A_in.rows()) + "x" +
                        std::to_string(A_in.cols()) + ", expected square");
-  Eigen::SparseMatrix<double> A = A_in;
-  A.makeCompressed();
+  // CHOLMOD needs a compressed matrix: copy only when the caller's is not
+  Eigen::SparseMatrix<double> copy;
+  if (!A_in.isCompressed()) {
+    copy = A_in;
+    copy.makeCompressed();
+  }
+  const Eigen::SparseMatrix<double>& A = A_in.isCompressed() ? A_in : copy;
   const ScopedOmpDynamic omp_dynamic;
   Impl& m = *impl_;
   m.factorized = false;
