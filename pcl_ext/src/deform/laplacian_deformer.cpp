@@ -97,7 +97,7 @@ void LaplacianDeformer::setMesh(const TriMesh& mesh) {
   for (const auto& c : constraints_) checkConstraint(c, "setMesh");
   const auto t0 = Clock::now();
   report_progress(progress_, 0.0, "laplacian");
-  L_ = laplacian(mesh_.V, mesh_.F, weights_);
+  L_ = laplacian(mesh_.V, mesh_.F, weights_, sliver_guard_);
   if (weights_ == LaplacianWeights::Cotangent) {
     const Eigen::VectorXd A = voronoi_areas(mesh_.V, mesh_.F);
     double sum = 0;
@@ -272,6 +272,12 @@ void LaplacianDeformer::setRotations(const std::vector<Eigen::Matrix3d>& R) {
   if (!R.empty()) use_rotation_field_ = false;
 }
 
+void LaplacianDeformer::setSliverGuard(double guard) {
+  if (!(guard >= 0 && std::isfinite(guard)))
+    throw InvalidInput("[tbsp::LaplacianDeformer::setSliverGuard] guard must be >= 0 and finite (0: off)");
+  sliver_guard_ = guard;
+}
+
 void LaplacianDeformer::setAnchor(double epsilon) {
   if (!(std::isfinite(epsilon) && epsilon >= 0))
     throw InvalidInput("[tbsp::LaplacianDeformer::setAnchor] epsilon must be >= 0 and finite");
@@ -405,7 +411,16 @@ void LaplacianDeformer::buildSystem() {
   // optional anchor ε‖x − V_rest‖² (setAnchor): keeps the factorization positive definite when
   // a folded or degenerate mesh gives the Laplacian extra (near-)null vectors
   auto factorize = [&](Eigen::SparseMatrix<double>& N) {
-    c.anchor = nf > 0 ? anchor_ * N.diagonal().cwiseAbs().mean() : 0.0;
+    c.anchor = 0.0;
+    if (nf > 0 && anchor_ > 0) {
+      // relative to the median diagonal entry: robust to a few huge entries (the cotangents of
+      // a nearly degenerate triangle), which made a mean-relative anchor outweigh every
+      // constraint so the solve returned the rest shape
+      std::vector<double> dg(std::size_t(N.rows()));
+      for (Eigen::Index i = 0; i < N.rows(); ++i) dg[std::size_t(i)] = std::abs(N.coeff(i, i));
+      std::nth_element(dg.begin(), dg.begin() + long(dg.size() / 2), dg.end());
+      c.anchor = anchor_ * dg[dg.size() / 2];
+    }
     if (c.anchor > 0)
       for (Eigen::Index i = 0; i < N.rows(); ++i) N.coeffRef(i, i) += c.anchor;
     report_progress(progress_, 0.3, "factorize");

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <vector>
 
+#include "tbsp/core/error.h"
+
 namespace tbsp {
 
 namespace {
@@ -89,7 +91,10 @@ Eigen::SparseMatrix<double> uniform_graph_laplacian(const Eigen::MatrixX3i& F, E
   return G + D;
 }
 
-Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, LaplacianWeights weights) {
+Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, LaplacianWeights weights,
+                                      double sliver_guard) {
+  if (!(sliver_guard >= 0 && std::isfinite(sliver_guard)))
+    throw InvalidInput("[tbsp::laplacian] sliver_guard must be >= 0 and finite (0: off)");
   const Eigen::Index n = V.rows();
   Eigen::SparseMatrix<double> K;
   Eigen::VectorXd scale(n);
@@ -102,6 +107,21 @@ Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::Ma
       if (A(i) > 0) { sum += A(i); ++cnt; }
     const double floor = cnt ? 1e-8 * sum / double(cnt) : 1.0;
     // C_ij = ½(cot α + cot β)  =>  w_ij = 2 C_ij / (2 A_i) = C_ij / A_i
+    if (sliver_guard > 0) {
+      Eigen::VectorXd e2 = Eigen::VectorXd::Zero(n), cnt_e = Eigen::VectorXd::Zero(n);
+      for (Eigen::Index f = 0; f < F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+          const int a = F(f, k), b = F(f, (k + 1) % 3);
+          const double len = (V.row(a) - V.row(b)).norm();
+          e2(a) += len; e2(b) += len;
+          cnt_e(a) += 1; cnt_e(b) += 1;
+        }
+      for (Eigen::Index i = 0; i < n; ++i)
+        if (cnt_e(i) > 0) {
+          const double mean_edge = e2(i) / cnt_e(i);
+          A(i) = std::max(A(i), sliver_guard * mean_edge * mean_edge);
+        }
+    }
     for (Eigen::Index i = 0; i < n; ++i) scale(i) = 1.0 / std::max(A(i), floor);
   } else {
     K = uniform_graph_laplacian(F, n);

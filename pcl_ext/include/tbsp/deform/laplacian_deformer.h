@@ -166,10 +166,15 @@ public:
   void setScale(double lambda);
   double scale() const { return scale_; }
 
-  /// \brief Adds ε·mean(diag)·‖x − V_rest‖² to the energy (default ε = 0: off). A tiny ε
+  /// \brief Adds ε·median(diag)·‖x − V_rest‖² to the energy (default ε = 0: off). A tiny ε
   /// (1e-9) keeps the system positive definite on folded/degenerate meshes whose Laplacian has
   /// extra near-null vectors, at the cost of a small bias towards the rest positions.
   void setAnchor(double epsilon);
+
+  /// \brief Sliver guard of the cotangent Laplacian (laplacian(): vertex areas floored at
+  /// guard · (mean edge length)²; default 0 = off). Takes effect at the next setMesh().
+  /// \throws InvalidInput when negative or not finite.
+  void setSliverGuard(double guard);
 
   /// Progress callback (stages: laplacian, geodesics, factorize, rotations, solve).
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
@@ -211,6 +216,7 @@ private:
   std::vector<Eigen::Matrix3d> user_rotations_, last_rotations_;
   double scale_ = 1.0;
   double anchor_ = 0.0;
+  double sliver_guard_ = 0.0;
   ProgressCallback progress_;
   DeformReport report_;
   std::unique_ptr<Cache> cache_;
