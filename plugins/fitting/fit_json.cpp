@@ -130,7 +130,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
   nlohmann::json h = nlohmann::json::array();
   for (const auto& it : r.history)
     h.push_back({{"iteration", it.iteration}, {"match_radius", it.match_radius}, {"matched", it.matched},
-                 {"max_move_p99", it.max_move}, {"seconds", it.seconds}, {"matching_seconds", it.matching_seconds}, {"solve_seconds", it.solve_seconds}});
+                 {"max_move_p99", it.max_move}, {"seconds", it.seconds}, {"matching_seconds", it.matching_seconds}, {"solve_seconds", it.solve_seconds}, {"binned", it.binned}});
   j["history"] = h;
   j["scale"] = r.scale;
   const auto& u = r.used;

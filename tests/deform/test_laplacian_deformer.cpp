@@ -7,6 +7,10 @@
 #include "tbsp/deform/laplacian_deformer.h"
 #include "tbsp/mesh/primitives.h"
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
 using namespace tbsp;
 using tbsp::test::farthest_points;
 
@@ -143,6 +147,40 @@ TEST(LaplacianDeformer, RotationFieldReproducesRigidRotationOfPrimitive) {
   EXPECT_EQ(d.report().rotation_nodes, 12);
   EXPECT_EQ(d.lastRotations().size(), std::size_t(m.V.rows()));
 }
+
+#ifdef _OPENMP
+// deform() builds the rotation field's skeleton concurrently with the factorization when it
+// has two threads: the result must be bit-identical to the sequential build, and errors and
+// progress must still come out
+TEST(LaplacianDeformer, ConcurrentSetUpGivesTheSequentialResult) {
+  const TriMesh m = make_tube(40, 16, 1.0, 0.1);
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(1.0, Eigen::Vector3d(1, 0.2, 0.5).normalized()).toRotationMatrix();
+  const Eigen::MatrixX3d target = m.V * R.transpose();
+  const int threads = omp_get_max_threads();
+  Eigen::MatrixX3d X[2];
+  for (int k = 0; k < 2; ++k) {
+    omp_set_num_threads(k == 0 ? 1 : 2);
+    LaplacianDeformer d;
+    d.setMesh(m);
+    for (int v : farthest_points(m.V, 10)) d.addPositionConstraint(SurfacePoint::atVertex(v), target.row(v).transpose());
+    d.setUseRotationField(true);
+    int calls = 0;
+    d.setProgressCallback([&](double, const std::string&) { ++calls; return true; });
+    X[k] = d.deform();
+    EXPECT_GT(calls, 0);
+    EXPECT_GT(d.report().t_graph, 0);
+  }
+  EXPECT_EQ((X[0] - X[1]).cwiseAbs().maxCoeff(), 0.0);
+  // an error of either part is rethrown: a rotation field needs 3 non-collinear nodes
+  omp_set_num_threads(2);
+  LaplacianDeformer d;
+  d.setMesh(m);
+  d.addPositionConstraint(SurfacePoint::atVertex(0), m.V.row(0).transpose());
+  d.setUseRotationField(true);
+  EXPECT_THROW(d.deform(), InvalidInput);
+  omp_set_num_threads(threads);
+}
+#endif
 
 TEST(LaplacianDeformer, UserRotationsAreUsed) {
   const TriMesh m = make_tube(20, 10, 1.0, 0.1);

@@ -129,3 +129,28 @@ TEST(TemplateFittingGroundTruth, OverRelaxationReachesTheSameFitInFewerIteration
   EXPECT_LT(rb.iterations, ra.iterations);
   EXPECT_LT(mean_diff, 0.001);  // 0.1 % of the diagonal
 }
+
+TEST(TemplateFittingGroundTruth, BinnedMatchingAtLargeRadiiGivesTheExactFit) {
+  // the first coarse-to-fine iterations match against the binned cloud; the fit must be the one
+  // of exact matching to well within its own error
+  TBSP_REQUIRE_FILE(test::shared(kBunny));
+  const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), {});
+  FitParameters exact, binned;
+  exact.binned_matching = false;
+  TriMesh a, b;
+  std::vector<VertexStatus> st;
+  const FitReport ra = fit_template(s.templ, s.P, s.N, s.markers, {}, exact, a, st);
+  const FitReport rb = fit_template(s.templ, s.P, s.N, s.markers, {}, binned, b, st);
+  const synth::ScenarioErrors ea = synth::evaluate(s, a), eb = synth::evaluate(s, b);
+  const double mean_diff = (a.V - b.V).rowwise().norm().mean() / s.diag;
+  std::printf("  exact: clean Hausdorff %.3f%%, hole %.3f%%; binned: %.3f%%, %.3f%%; mean vertex difference %.4f%%\n",
+              100 * ea.hausdorff_clean_rel, 100 * ea.hole_mean_rel, 100 * eb.hausdorff_clean_rel, 100 * eb.hole_mean_rel,
+              100 * mean_diff);
+  ASSERT_FALSE(rb.history.empty());
+  EXPECT_TRUE(rb.history.front().binned);   // r = 3 % of the diagonal: bins of 1 %
+  EXPECT_FALSE(rb.history.back().binned);   // the final radius matches every point
+  for (const auto& h : ra.history) EXPECT_FALSE(h.binned);
+  EXPECT_LT(mean_diff, 0.001);  // 0.1 % of the diagonal
+  EXPECT_LT(std::abs(eb.hausdorff_clean_rel - ea.hausdorff_clean_rel), 0.001);
+  EXPECT_LT(std::abs(eb.hole_mean_rel - ea.hole_mean_rel), 0.001);
+}

@@ -1,7 +1,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 
+#include "tbsp/core/error.h"
 #include "tbsp/mesh/cotan_laplacian.h"
 #include "tbsp/mesh/primitives.h"
 #include "tbsp/mesh/tri_mesh.h"
@@ -121,4 +123,35 @@ TEST(CotanLaplacian, UniformIsCentroidMinusVertex) {
   ASSERT_EQ(deg, 5);
   EXPECT_LT((d0.row(0) - (c / 5 - ico.V.row(0))).norm(), 1e-12);
   EXPECT_TRUE(d.allFinite());
+}
+
+// The sliver guard floors vertex areas at guard · (mean edge length)²: no change on a regular
+// mesh, bounded rows at a vertex surrounded by slivers.
+TEST(CotanLaplacian, SliverGuardBoundsRowsAndLeavesRegularMeshesAlone) {
+  const TriMesh s = make_icosphere(2);
+  const Eigen::SparseMatrix<double> L0 = laplacian(s.V, s.F), L1 = laplacian(s.V, s.F, LaplacianWeights::Cotangent, 0.1);
+  EXPECT_EQ((L1 - L0).norm(), 0.0);  // every area of a regular sphere is far above 0.1 ē²
+  // vertex 4 in the middle of a strip of four slivers (0.5 long, 1e-6 wide): Voronoi area ~1e-7
+  TriMesh m;
+  m.V.resize(5, 3);
+  m.V << 0, 0, 0,    //
+      1, 0, 0,       //
+      0.5, 1e-6, 0,  //
+      0.5, -1e-6, 0, //
+      0.5, 0, 0;
+  m.F.resize(4, 3);
+  m.F << 0, 4, 2,  //
+      4, 1, 2,     //
+      0, 3, 4,     //
+      4, 3, 1;
+  const Eigen::SparseMatrix<double> A = laplacian(m.V, m.F), B = laplacian(m.V, m.F, LaplacianWeights::Cotangent, 0.1);
+  const double a = std::abs(A.coeff(4, 4)), b = std::abs(B.coeff(4, 4));
+  std::printf("  sliver vertex: L_44 %.3g unguarded, %.3g guarded\n", a, b);
+  EXPECT_GT(a, 1e9);  // unguarded: the row of the sliver vertex explodes (cot up to 1e4 / area 1e-7)
+  // guarded: the area is at least 0.1 ē² (ē = 0.25): |row| ≤ 4 · 2·1e4 / 0.00625
+  EXPECT_LT(b, 1.3e7);
+  EXPECT_LT(b, 1e-3 * a);
+  EXPECT_LT(max_abs_row_sum(B), 1e-9 * std::max(1.0, B.norm()));  // rows still sum to zero
+  EXPECT_THROW(laplacian(m.V, m.F, LaplacianWeights::Cotangent, -1), InvalidInput);
+  EXPECT_THROW(laplacian(m.V, m.F, LaplacianWeights::Cotangent, std::nan("")), InvalidInput);
 }

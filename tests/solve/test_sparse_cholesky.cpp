@@ -49,3 +49,21 @@ TEST_P(SparseCholeskyBackends, SingularSystemIsANumericalFailure) {
 
 INSTANTIATE_TEST_SUITE_P(Backends, SparseCholeskyBackends,
                          ::testing::Values(SparseCholesky::Backend::Cholmod, SparseCholesky::Backend::EigenLDLT));
+
+#ifdef _OPENMP
+#include <omp.h>
+// compute()/solve() turn on OpenMP dynamic adjustment while CHOLMOD runs (its fixed 4-thread
+// teams oversubscribe small machines) and restore the caller's setting afterwards
+TEST(SparseCholeskyThreads, CallerDynamicSettingIsRestored) {
+  for (int before : {0, 1}) {
+    omp_set_dynamic(before);
+    SparseCholesky s;
+    s.compute(spd_system(1.0));
+    EXPECT_EQ(omp_get_dynamic(), before);
+    const Eigen::MatrixXd x = s.solve(Eigen::MatrixXd::Ones(s.rows(), 2));
+    EXPECT_EQ(omp_get_dynamic(), before);
+    EXPECT_TRUE(x.allFinite());
+  }
+  omp_set_dynamic(0);
+}
+#endif

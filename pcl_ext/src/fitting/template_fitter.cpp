@@ -469,6 +469,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
     }
     const double t_match_it = since(tm);
+    const bool used_bins = binned.has_value();
     rep.t_matching += t_match_it;
     const Eigen::Index n_matched = std::count(matched.begin(), matched.end(), 1);
     if (logger()->should_log(spdlog::level::trace)) {
@@ -715,7 +716,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
       rep.t_fairing += since(tm);
     }
-    rep.history.push_back({it, r, n_matched, move, since(t_iter), t_match_it, t_solve_it});
+    rep.history.push_back({it, r, n_matched, move, since(t_iter), t_match_it, t_solve_it, used_bins});
     rep.iterations = it;
     logger()->debug("[TemplateFitting] iteration {}: r={:.4g}, matched {}, max move {:.3g}", it, r, n_matched, move);
     if (stop && !remeshed) {

@@ -133,6 +133,7 @@ struct FitIteration {
   double seconds = 0;
   double matching_seconds = 0;  ///< of `seconds`: the neighbour search and targets
   double solve_seconds = 0;     ///< of `seconds`: system update, factorization (if any), solve
+  bool binned = false;          ///< matched against the binned cloud (FitParameters::binned_matching)
 };
 
 /// \brief Everything reconstruct() reports (also written as the JSON report of `tbsp fit`).
