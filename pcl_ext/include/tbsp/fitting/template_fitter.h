@@ -77,8 +77,8 @@ struct FitParameters {
   /// instead of every point, when that has under half as many entries. The kernel-weighted
   /// mean and plane are then sums over bins (kernel at the bin centroid); the final radius
   /// always matches every point. 43k vertices / 100k points: iteration 1 matching 0.45 → 0.09 s,
-  /// same accuracy (docs/fitting.md). Not used with Laplacian updating / remeshing, whose
-  /// result depends on the exact early targets (see docs/fitting.md).
+  /// same accuracy (docs/fitting.md). Not used with Laplacian updating / remeshing: there a
+  /// robustness sweep stayed within 0.5 % with exact matching and not always with bins.
   bool binned_matching = true;
   int max_iterations = 15;
   /// r_max shrinks geometrically from initial_match_distance to max_match_distance over this
