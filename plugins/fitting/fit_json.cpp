@@ -151,7 +151,8 @@ nlohmann::json fit_report_json(const FitReport& r) {
   j["metrics"] = {{"bbox_diagonal", r.bbox_diagonal}, {"point_spacing", r.point_spacing},
                   {"hausdorff", r.hausdorff}, {"hausdorff_relative", r.hausdorff_rel}, {"rms", r.rms},
                   {"mean", r.mean}, {"p99", r.p99}, {"coverage_vertices", r.coverage_vertices},
-                  {"coverage_points", r.coverage_points}, {"flipped_faces", r.flipped_faces}, {"folded_edges", r.folded_edges}};
+                  {"coverage_points", r.coverage_points}, {"flipped_faces", r.flipped_faces}, {"folded_edges", r.folded_edges},
+                  {"local_folds", r.local_folds}, {"untangled_vertices", r.untangled_vertices}};
   j["timings_s"] = {{"normals", r.t_normals},     {"search_structure", r.t_search}, {"initial_deformation", r.t_initial},
                     {"global_scale", r.t_scale},  {"iterations", r.t_iterations},   {"matching", r.t_matching},
                     {"solve", r.t_solve},         {"propagation", r.t_propagation}, {"remeshing", r.t_remeshing},

@@ -50,18 +50,24 @@ TEST(SphereToRealScan, IgeaWithUpdatingRemeshingFairing) {
   // independent fold-over check against the scan's own (consistently oriented) surface normals
   const Eigen::MatrixX3d SN = vertex_normals(scan.V, scan.F), FN = face_normals(fit.V, fit.F);
   const PointSearch tree(scan.V);
-  int opposing = 0;
+  int opposing = 0, opposing_120 = 0;
   for (Eigen::Index f = 0; f < fit.F.rows(); ++f) {
     const Eigen::Vector3d cf = (fit.V.row(fit.F(f, 0)) + fit.V.row(fit.F(f, 1)) + fit.V.row(fit.F(f, 2))).transpose() / 3.0;
-    if (FN.row(f).dot(SN.row(tree.nearest(cf))) < 0) ++opposing;
+    const double d = FN.row(f).dot(SN.row(tree.nearest(cf)));
+    opposing += d < 0;
+    opposing_120 += d < -0.5;
   }
   std::printf("  sphere 642 -> %ld vertices, %d iterations, %.1f s: Hausdorff %.3f%%, p99 %.3f%%, rms %.3f%%, folded edges %d, "
-              "faces opposing the true normals %d of %ld\n",
+              "local folds %d (%d vertices untangled), faces opposing the true normals %d (by > 120 deg: %d) of %ld\n",
               (long)r.vertices, r.iterations, r.t_total, 100 * r.hausdorff_rel, 100 * r.p99 / r.bbox_diagonal,
-              100 * r.rms / r.bbox_diagonal, r.folded_edges, opposing, (long)fit.F.rows());
+              100 * r.rms / r.bbox_diagonal, r.folded_edges, r.local_folds, r.untangled_vertices, opposing, opposing_120,
+              (long)fit.F.rows());
   // issue target; measured 0.28 % (updating weights 1.8 ... 2.5 give 0.28 ... 0.48 %, any
   // OPENBLAS_NUM_THREADS: the fit runs BLAS single-threaded; docs/fitting.md)
   EXPECT_LE(r.hausdorff_rel, 0.005);
-  EXPECT_EQ(r.folded_edges, 0);                            // no edge folded back by > 120°
-  EXPECT_LT(double(opposing) / double(fit.F.rows()), 0.01);  // issue target 0: measured 0.32 %
+  EXPECT_EQ(r.folded_edges, 0);  // no edge folded back by > 120°
+  EXPECT_EQ(r.local_folds, 0);   // no face against its surroundings (small crumples)
+  // against the scan's true normals, issue target 0: measured 215 of 110k (0.19 %), mostly
+  // stretched strips under the chin and at the back of the neck (docs/fitting.md)
+  EXPECT_LT(double(opposing) / double(fit.F.rows()), 0.01);
 }

@@ -780,9 +780,10 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     rep.t_propagation = since(t0);
   }
 
-  // ---- fold repair (with fairing, §5.5.3): faces opposing the local cloud normals and edges
-  // whose faces are bent back by more than 120° are fold-overs; their vertices and one-rings get
-  // umbrella smoothing steps until none is left (at most 30 rounds)
+  // ---- fold repair (with fairing, §5.5.3): edges whose faces are bent back by more than 120°
+  // are fold-overs; their vertices and one-rings get umbrella smoothing steps until none is left
+  // (at most 30 rounds); then small crumples (count_local_folds) are untangled; repeated while
+  // the untangling bends edges back (at most 3 passes)
   auto flipped_faces = [&](const Eigen::MatrixX3d& X, std::vector<char>* mark) {
     const Eigen::MatrixX3d FN = face_normals(X, F);
     std::vector<char> is_flipped(std::size_t(F.rows()), 0);
@@ -828,27 +829,35 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     t0 = Clock::now();
     const auto adj = vertex_adjacency(F, V.rows());
     std::vector<char> mark;
-    for (int round = 0; round < 30; ++round) {
-      mark.assign(std::size_t(V.rows()), 0);
-      const int bad = folded_edges(V, &mark);  // geometric: independent of estimated normals
-      if (bad == 0) break;
-      std::vector<char> region = mark;
-      for (int ring = 0; ring < 1 + round / 5; ++ring) {  // the region grows while folds persist
-        const std::vector<char> prev = region;
-        for (Eigen::Index i = 0; i < V.rows(); ++i)
-          if (prev[std::size_t(i)])
-            for (int j : adj[std::size_t(i)]) region[std::size_t(j)] = 1;
-      }
-      for (int step = 0; step < 5; ++step) {
-        Eigen::MatrixX3d Vs = V;
-        for (Eigen::Index i = 0; i < V.rows(); ++i) {
-          if (!region[std::size_t(i)] || adj[std::size_t(i)].empty()) continue;
-          Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
-          for (int j : adj[std::size_t(i)]) c += V.row(j);
-          Vs.row(i) = 0.5 * V.row(i) + 0.5 * c / double(adj[std::size_t(i)].size());
+    for (int pass = 0; pass < 3; ++pass) {
+      for (int round = 0; round < 30; ++round) {
+        mark.assign(std::size_t(V.rows()), 0);
+        const int bad = folded_edges(V, &mark);  // geometric: independent of estimated normals
+        if (bad == 0) break;
+        std::vector<char> region = mark;
+        for (int ring = 0; ring < 1 + round / 5; ++ring) {  // the region grows while folds persist
+          const std::vector<char> prev = region;
+          for (Eigen::Index i = 0; i < V.rows(); ++i)
+            if (prev[std::size_t(i)])
+              for (int j : adj[std::size_t(i)]) region[std::size_t(j)] = 1;
         }
-        V = Vs;
+        for (int step = 0; step < 5; ++step) {
+          Eigen::MatrixX3d Vs = V;
+          for (Eigen::Index i = 0; i < V.rows(); ++i) {
+            if (!region[std::size_t(i)] || adj[std::size_t(i)].empty()) continue;
+            Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+            for (int j : adj[std::size_t(i)]) c += V.row(j);
+            Vs.row(i) = 0.5 * V.row(i) + 0.5 * c / double(adj[std::size_t(i)].size());
+          }
+          V = Vs;
+        }
       }
+      // small crumples that bend no single edge back (local_folds): their vertices are re-placed
+      // by the membrane of their one-ring, grown by one ring only where that is not enough (a
+      // wider membrane flattens real detail: 2 rings raised the Igea fit's Hausdorff 0.44 -> 0.63 %)
+      const UntangleResult ur = untangle_local_folds(V, F, 0, 20, 1);
+      rep.untangled_vertices += ur.vertices_moved;
+      if (ur.vertices_moved == 0 || folded_edges(V, nullptr) == 0) break;  // else: repair the edges it bent
     }
     rep.t_fairing += since(t0);
   }
@@ -876,6 +885,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     const int flipped = flipped_faces(V, nullptr);
     rep.flipped_faces = flipped;
     rep.folded_edges = folded_edges(V, nullptr);
+    rep.local_folds = count_local_folds(V, F);
+    if (u.fairing && rep.local_folds > 0)
+      rep.message += std::to_string(rep.local_folds) + " faces still fold against their surroundings after the fold repair. ";
   }
   rep.t_metrics = since(t0);
   rep.vertices = V.rows();

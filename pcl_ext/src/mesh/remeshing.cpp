@@ -6,6 +6,10 @@
 #include <map>
 #include <unordered_map>
 
+#include <Eigen/SparseCholesky>
+
+#include "tbsp/mesh/topology.h"
+
 #include "tbsp/mesh/tri_mesh.h"
 
 namespace tbsp {
@@ -161,6 +165,148 @@ int count_flipped_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, co
   for (Eigen::Index f = 0; f < F.rows() && f < ref.rows(); ++f)
     if (ref.row(f).norm() > 0 && N.row(f).dot(ref.row(f)) < 0) ++n;
   return n;
+}
+
+int count_local_folds(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, std::vector<char>* face_mark) {
+  const Eigen::Index nv = V.rows(), nf = F.rows();
+  // area vectors per face, summed per vertex (S1), then over each vertex's closed one-ring (S2)
+  Eigen::MatrixX3d A(nf, 3);
+  for (Eigen::Index f = 0; f < nf; ++f) {
+    const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), c = V.row(F(f, 2)).transpose();
+    A.row(f) = (b - a).cross(c - a).transpose();
+  }
+  std::vector<std::vector<int>> vf(static_cast<std::size_t>(nv));
+  for (Eigen::Index f = 0; f < nf; ++f)
+    for (int q = 0; q < 3; ++q) vf[std::size_t(F(f, q))].push_back(int(f));
+  const auto adj = vertex_adjacency(F, nv);
+  // per face: the area vectors of the distinct faces at the vertices within two rings of its
+  // corners, summed
+  std::vector<char> folded(std::size_t(nf), 0);
+#pragma omp parallel
+  {
+    std::vector<Eigen::Index> vstamp(std::size_t(nv), -1), fstamp(std::size_t(nf), -1);
+    std::vector<int> verts;
+#pragma omp for schedule(dynamic, 1024)
+    for (Eigen::Index f = 0; f < nf; ++f) {
+      verts.clear();
+      for (int q = 0; q < 3; ++q) {
+        const int v = F(f, q);
+        if (vstamp[std::size_t(v)] != f) { vstamp[std::size_t(v)] = f; verts.push_back(v); }
+      }
+      for (int ring = 0; ring < 2; ++ring) {
+        const std::size_t end = verts.size();
+        for (std::size_t k = 0; k < end; ++k)
+          for (int w : adj[std::size_t(verts[k])])
+            if (vstamp[std::size_t(w)] != f) { vstamp[std::size_t(w)] = f; verts.push_back(w); }
+      }
+      Eigen::RowVector3d m = Eigen::RowVector3d::Zero();
+      for (int v : verts)
+        for (int g : vf[std::size_t(v)])
+          if (fstamp[std::size_t(g)] != f) { fstamp[std::size_t(g)] = f; m += A.row(g); }
+      folded[std::size_t(f)] = A.row(f).dot(m) < 0;
+    }
+  }
+  if (face_mark) *face_mark = folded;
+  return int(std::count(folded.begin(), folded.end(), 1));
+}
+
+UntangleResult untangle_local_folds(Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, int rings, int max_rounds, int max_rings) {
+  UntangleResult res;
+  const Eigen::Index nv = V.rows();
+  std::vector<char> fmark;
+  res.folds_before = res.folds_after = count_local_folds(V, F, &fmark);
+  if (res.folds_before == 0) return res;
+  const auto adj = vertex_adjacency(F, nv);
+  // vertices on a mesh boundary (an edge with one face) never move
+  std::vector<char> on_boundary(std::size_t(nv), 0);
+  {
+    std::unordered_map<std::uint64_t, int> edge_faces;
+    edge_faces.reserve(std::size_t(F.rows()) * 3);
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) ++edge_faces[edge_key(F(f, k), F(f, (k + 1) % 3))];
+    for (const auto& [key, n] : edge_faces)
+      if (n != 2) {
+        on_boundary[std::size_t(key >> 32)] = 1;
+        on_boundary[std::size_t(key & 0xffffffffu)] = 1;
+      }
+  }
+  std::vector<char> moved(std::size_t(nv), 0);
+  int cur_rings = std::max(0, rings);
+  for (int round = 0; round < max_rounds && res.folds_after > 0; ++round) {
+    ++res.rounds;
+    std::vector<char> region(std::size_t(nv), 0);
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+      if (fmark[std::size_t(f)])
+        for (int q = 0; q < 3; ++q) region[std::size_t(F(f, q))] = 1;
+    for (int ring = 0; ring < cur_rings; ++ring) {
+      const std::vector<char> prev = region;
+      for (Eigen::Index i = 0; i < nv; ++i)
+        if (prev[std::size_t(i)])
+          for (int j : adj[std::size_t(i)]) region[std::size_t(j)] = 1;
+    }
+    // interior unknowns: region vertices off the mesh boundary
+    std::vector<int> index(std::size_t(nv), -1);
+    std::vector<int> unknowns;
+    for (Eigen::Index i = 0; i < nv; ++i)
+      if (region[std::size_t(i)] && !on_boundary[std::size_t(i)] && !adj[std::size_t(i)].empty()) {
+        index[std::size_t(i)] = int(unknowns.size());
+        unknowns.push_back(int(i));
+      }
+    if (unknowns.empty()) break;
+    // uniform Laplacian, Dirichlet on everything outside the unknowns: deg x_i - sum_{j unknown} x_j
+    // = sum_{j fixed} x_j (symmetric positive definite: every component touches a fixed vertex,
+    // or is a whole closed component — then the first vertex is pinned)
+    const Eigen::Index n = Eigen::Index(unknowns.size());
+    std::vector<Eigen::Triplet<double>> T;
+    Eigen::MatrixX3d B = Eigen::MatrixX3d::Zero(n, 3);
+    std::vector<char> touches_fixed(std::size_t(n), 0);
+    for (Eigen::Index r = 0; r < n; ++r) {
+      const int i = unknowns[std::size_t(r)];
+      T.emplace_back(r, r, double(adj[std::size_t(i)].size()));
+      for (int j : adj[std::size_t(i)]) {
+        if (index[std::size_t(j)] >= 0) T.emplace_back(r, index[std::size_t(j)], -1.0);
+        else { B.row(r) += V.row(j); touches_fixed[std::size_t(r)] = 1; }
+      }
+    }
+    // a closed component entirely inside the region (the whole mesh folded): pin one vertex per
+    // component so the system stays definite
+    {
+      std::vector<int> comp(std::size_t(n), -1);
+      for (Eigen::Index s = 0; s < n; ++s) {
+        if (comp[std::size_t(s)] >= 0) continue;
+        std::vector<int> stack{int(s)}, members;
+        comp[std::size_t(s)] = int(s);
+        bool fixed = false;
+        while (!stack.empty()) {
+          const int r = stack.back();
+          stack.pop_back();
+          members.push_back(r);
+          fixed = fixed || touches_fixed[std::size_t(r)];
+          for (int j : adj[std::size_t(unknowns[std::size_t(r)])]) {
+            const int q = index[std::size_t(j)];
+            if (q >= 0 && comp[std::size_t(q)] < 0) { comp[std::size_t(q)] = int(s); stack.push_back(q); }
+          }
+        }
+        if (!fixed) { T.emplace_back(members[0], members[0], 1.0); B.row(members[0]) += V.row(unknowns[std::size_t(members[0])]); }
+      }
+    }
+    Eigen::SparseMatrix<double> M(n, n);
+    M.setFromTriplets(T.begin(), T.end());
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(M);
+    if (solver.info() != Eigen::Success) break;
+    const Eigen::MatrixX3d X = solver.solve(B);
+    if (solver.info() != Eigen::Success || !X.allFinite()) break;
+    for (Eigen::Index r = 0; r < n; ++r) {
+      V.row(unknowns[std::size_t(r)]) = X.row(r);
+      moved[std::size_t(unknowns[std::size_t(r)])] = 1;
+    }
+    const int before = res.folds_after;
+    res.folds_after = count_local_folds(V, F, &fmark);
+    // the smallest region that works: grow it only while a round makes no progress
+    if (res.folds_after >= before) cur_rings = std::min(cur_rings + 1, std::max(0, max_rings));
+  }
+  res.vertices_moved = int(std::count(moved.begin(), moved.end(), 1));
+  return res;
 }
 
 }  // namespace tbsp

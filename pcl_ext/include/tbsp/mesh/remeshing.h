@@ -36,4 +36,32 @@ int valence_edge_flips(const Eigen::MatrixX3d& V, Eigen::MatrixX3i& F, int sweep
 /// (n_f · ref_f < 0), i.e. fold-overs; rows of ref with zero length are ignored.
 int count_flipped_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& reference_face_normals);
 
+/// \brief Local fold-overs ("pleats"): faces whose normal points against the area-weighted mean
+/// normal of the faces around them (the faces at the vertices within two rings of the face's
+/// corners, each counted once, weighted by its area). A surface that doubles back on itself in a small crumple
+/// has such faces even when no single edge is bent back sharply; a smooth surface has none unless
+/// it turns by more than 90° within those rings. O(#F · two-ring size), parallel.
+/// \param face_mark if given, resized to #F and set to 1 for each folded face.
+/// \returns the number of folded faces.
+int count_local_folds(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, std::vector<char>* face_mark = nullptr);
+
+struct UntangleResult {
+  int folds_before = 0;    ///< count_local_folds before
+  int folds_after = 0;     ///< ... and after
+  int rounds = 0;          ///< rounds run
+  int vertices_moved = 0;  ///< distinct vertices re-placed
+};
+
+/// \brief Removes local fold-overs (count_local_folds) by re-placing the vertices of the folded
+/// faces and `rings` rings around them: they are set to the harmonic (uniform-weight)
+/// interpolation of the fixed vertices around them — a discrete membrane. Projected on any plane
+/// that is Tutte's embedding of the projected region boundary, so a disc-shaped region whose
+/// boundary projects to a convex polygon comes out fold-free. Rounds repeat on the folds left;
+/// the region grows by one ring only after a round without progress (up to `max_rings`), so the
+/// surface changes as little as possible: with rings = 0 the folded faces' own vertices move,
+/// about the size of the crumple. Vertices on a mesh boundary stay fixed. Each round is one
+/// sparse solve over the region vertices. \returns counts before/after.
+UntangleResult untangle_local_folds(Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, int rings = 0, int max_rounds = 20,
+                                    int max_rings = 3);
+
 }  // namespace tbsp

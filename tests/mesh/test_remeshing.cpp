@@ -1,0 +1,127 @@
+// Remeshing utilities of the template fitter (§5.5.2 subdivision, fold detection and repair).
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+
+#include "tbsp/mesh/primitives.h"
+#include "tbsp/mesh/remeshing.h"
+#include "tbsp/mesh/topology.h"
+#include "tbsp/mesh/tri_mesh.h"
+
+using namespace tbsp;
+
+namespace {
+// index of the grid vertex nearest to (x, y)
+Eigen::Index nearest_vertex(const TriMesh& m, double x, double y) {
+  Eigen::Index best = 0;
+  (m.V.rowwise() - Eigen::RowVector3d(x, y, 0)).rowwise().squaredNorm().minCoeff(&best);
+  return best;
+}
+double total_area(const TriMesh& m) {
+  double a = 0;
+  for (Eigen::Index f = 0; f < m.F.rows(); ++f)
+    a += 0.5 * (m.V.row(m.F(f, 1)) - m.V.row(m.F(f, 0))).cross(m.V.row(m.F(f, 2)) - m.V.row(m.F(f, 0))).norm();
+  return a;
+}
+}  // namespace
+
+TEST(LocalFolds, SmoothSurfacesHaveNone) {
+  EXPECT_EQ(count_local_folds(make_icosphere(4).V, make_icosphere(4).F), 0);
+  const TriMesh grid = make_grid(20, 20, 1, 1, 0.1);  // jittered but every face positive
+  EXPECT_EQ(count_local_folds(grid.V, grid.F), 0);
+  const TriMesh tube = make_tube(12, 16);
+  EXPECT_EQ(count_local_folds(tube.V, tube.F), 0);
+  const TriMesh box = make_box(4, 4, 4);  // 90° edges: folds need more than 90° within two rings
+  EXPECT_EQ(count_local_folds(box.V, box.F), 0);
+}
+
+// A vertex dragged across its neighbours in a regular grid inverts the faces around it; the
+// membrane of its one-ring puts it back exactly (an interior vertex of the regular grid is the
+// mean of its six neighbours) and nothing else moves.
+TEST(LocalFolds, UntangleRemovesAGridCrumpleExactly) {
+  TriMesh m = make_grid(16, 16);
+  const Eigen::MatrixX3d V0 = m.V;
+  const Eigen::Index v = nearest_vertex(m, 0.5, 0.5);
+  m.V(v, 0) += 2.5 / 16;  // beyond its +x neighbour
+  std::vector<char> mark;
+  const int folds = count_local_folds(m.V, m.F, &mark);
+  EXPECT_GT(folds, 0);
+  EXPECT_EQ(count_flipped_faces(m.V, m.F, face_normals(V0, m.F)), folds);  // exactly the inverted faces
+  const UntangleResult r = untangle_local_folds(m.V, m.F);
+  EXPECT_EQ(r.folds_before, folds);
+  EXPECT_EQ(r.folds_after, 0);
+  EXPECT_EQ(count_local_folds(m.V, m.F), 0);
+  EXPECT_LT((m.V - V0).rowwise().norm().maxCoeff(), 1e-12);
+  EXPECT_GE(r.vertices_moved, 1);
+  EXPECT_LE(r.vertices_moved, 8);  // the folded faces' corners, not the whole grid
+}
+
+// On a sphere a vertex dragged along the surface past its neighbours folds the faces around it;
+// the repair brings it back between them, on the surface within the sagitta of its one-ring,
+// and leaves the rest of the sphere alone.
+TEST(LocalFolds, UntangleRepairsADraggedSphereVertex) {
+  TriMesh m = make_icosphere(3);  // edges ~0.19
+  const Eigen::MatrixX3d V0 = m.V;
+  const Eigen::Index v = 17;
+  const Eigen::Vector3d p = m.V.row(v).transpose();
+  const Eigen::Vector3d t = p.unitOrthogonal();
+  m.V.row(v) = (p + 0.3 * t).normalized().transpose();  // 1.5 edge lengths along the surface
+  ASSERT_GT(count_local_folds(m.V, m.F), 0);
+  const UntangleResult r = untangle_local_folds(m.V, m.F);
+  EXPECT_EQ(r.folds_after, 0);
+  EXPECT_EQ(count_flipped_faces(m.V, m.F, face_normals(V0, m.F)), 0);
+  // back between its neighbours, at their mean: inside the sphere by the one-ring's sagitta (~0.02)
+  EXPECT_NEAR(m.V.row(v).norm(), 1.0, 0.03);
+  EXPECT_LT((m.V.row(v) - V0.row(v)).norm(), 0.03);
+  Eigen::Index changed = 0;
+  for (Eigen::Index i = 0; i < m.V.rows(); ++i) changed += (m.V.row(i) - V0.row(i)).norm() > 1e-12;
+  EXPECT_LE(changed, 7);  // the vertex (and at most its one-ring, if the region had to grow)
+}
+
+TEST(LocalFolds, MeshBoundaryVerticesStayFixed) {
+  TriMesh m = make_grid(8, 8);
+  const Eigen::Index corner = nearest_vertex(m, 0, 0);
+  m.V.row(corner) = Eigen::RowVector3d(0.3, 0.3, 0);  // boundary vertex dragged inside: folds
+  ASSERT_GT(count_local_folds(m.V, m.F), 0);
+  const UntangleResult r = untangle_local_folds(m.V, m.F);
+  EXPECT_EQ((m.V.row(corner) - Eigen::RowVector3d(0.3, 0.3, 0)).norm(), 0.0);  // never moved
+  // the interior vertices may move to resolve what they can; the result is finite and reported
+  EXPECT_TRUE(m.V.allFinite());
+  EXPECT_EQ(r.folds_after, count_local_folds(m.V, m.F));
+  EXPECT_LE(r.folds_after, r.folds_before);
+}
+
+TEST(AdaptiveSubdivision, OneMarkedFaceGetsRedAndItsNeighboursGreen) {
+  const TriMesh m = make_grid(4, 4);
+  std::vector<char> marked(std::size_t(m.F.rows()), 0);
+  // an interior face: none of its vertices on the grid border
+  Eigen::Index f0 = -1;
+  for (Eigen::Index f = 0; f < m.F.rows() && f0 < 0; ++f) {
+    bool interior = true;
+    for (int q = 0; q < 3; ++q) {
+      const Eigen::RowVector3d x = m.V.row(m.F(f, q));
+      interior = interior && x(0) > 0.1 && x(0) < 0.9 && x(1) > 0.1 && x(1) < 0.9;
+    }
+    if (interior) f0 = f;
+  }
+  ASSERT_GE(f0, 0);
+  marked[std::size_t(f0)] = 1;
+  const SubdivisionResult s = adaptive_subdivide(m.V, m.F, marked);
+  EXPECT_EQ(s.red_faces, 1);
+  EXPECT_EQ(s.green_faces, 3);
+  EXPECT_EQ(s.V.rows(), m.V.rows() + 3);
+  EXPECT_EQ(s.F.rows(), m.F.rows() + 3 + 3);  // 1 -> 4 and three 1 -> 2
+  EXPECT_EQ(s.V.topRows(m.V.rows()), m.V);    // old vertices keep their indices
+  for (std::size_t k = 0; k < s.parents.size(); ++k) {
+    const auto [a, b] = s.parents[k];
+    EXPECT_LT((s.V.row(m.V.rows() + Eigen::Index(k)) - 0.5 * (m.V.row(a) + m.V.row(b))).norm(), 1e-15);
+  }
+  TriMesh out;
+  out.V = s.V;
+  out.F = s.F;
+  EXPECT_NEAR(total_area(out), 1.0, 1e-12);  // no overlap, no gap
+  Eigen::MatrixX3d up(s.F.rows(), 3);
+  up.rowwise() = Eigen::RowVector3d(0, 0, 1);
+  EXPECT_EQ(count_flipped_faces(s.V, s.F, up), 0);
+}
