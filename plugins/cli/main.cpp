@@ -332,6 +332,8 @@ int main(int argc, char** argv) {
   fitc->add_option("--theta-max", fa.p.max_normal_angle_deg, "max normal deviation θ_max in degrees");
   fitc->add_option("--iterations", fa.p.max_iterations, "max iterations");
   fitc->add_option("--match-weight", fa.p.match_weight, "weight of data constraints");
+  fitc->add_option("--detail-rounds", fa.p.detail_rounds,
+                   "rounds of Laplacian updating after the fit, unsupported vertices held (sharper protrusions; 0 = off)");
   fitc->add_flag("--laplacian-updating", fa.p.laplacian_updating, "§5.5.1: rebuild the Laplacian each iteration");
   fitc->add_flag("--remesh", fa.p.remeshing, "§5.5.2: adaptive subdivision (changes connectivity)");
   fitc->add_flag("--fairing", fa.p.fairing, "§5.5.3: tangential fairing against fold-overs");

@@ -143,11 +143,13 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"laplacian_updating", u.laplacian_updating}, {"remeshing", u.remeshing},
                      {"subdivision_error", u.subdivision_error}, {"fairing", u.fairing},
                      {"radius_steps", u.radius_steps}, {"freeze_constraints", u.freeze_constraints},
-                     {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation}};
+                     {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation},
+                     {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
+                     {"detail_weight", u.detail_weight}};
   j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
                  {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},
                  {"vertices", r.vertices}, {"faces", r.faces}, {"matched", r.matched}, {"propagated", r.propagated},
-                 {"masked", r.masked}};
+                 {"masked", r.masked}, {"detail_iterations_run", r.detail_iterations_run}};
   j["metrics"] = {{"bbox_diagonal", r.bbox_diagonal}, {"point_spacing", r.point_spacing},
                   {"hausdorff", r.hausdorff}, {"hausdorff_relative", r.hausdorff_rel}, {"rms", r.rms},
                   {"mean", r.mean}, {"p99", r.p99}, {"coverage_vertices", r.coverage_vertices},
@@ -155,7 +157,8 @@ nlohmann::json fit_report_json(const FitReport& r) {
                   {"local_folds", r.local_folds}, {"untangled_vertices", r.untangled_vertices}};
   j["timings_s"] = {{"normals", r.t_normals},     {"search_structure", r.t_search}, {"initial_deformation", r.t_initial},
                     {"global_scale", r.t_scale},  {"iterations", r.t_iterations},   {"matching", r.t_matching},
-                    {"solve", r.t_solve},         {"propagation", r.t_propagation}, {"remeshing", r.t_remeshing},
+                    {"solve", r.t_solve},         {"propagation", r.t_propagation}, {"detail", r.t_detail},
+                    {"remeshing", r.t_remeshing},
                     {"fairing", r.t_fairing},     {"metrics", r.t_metrics},         {"total", r.t_total}};
   return j;
 }

@@ -167,8 +167,8 @@ ScenarioErrors evaluate(const Scenario& s, const TriMesh& fit) {
   for (std::size_t k = 0; k < in.size(); ++k) { C.row(Eigen::Index(k)) = s.clean.row(in[k]); Q.row(Eigen::Index(k)) = s.P.row(in[k]); }
   e.hausdorff_clean_rel = md.distances(C).maxCoeff() / s.diag;
   e.hausdorff_noisy_rel = md.distances(Q).maxCoeff() / s.diag;
-  if (fit.V.rows() == s.target.rows()) {
-    const Eigen::VectorXd err = (fit.V - s.target).rowwise().norm();
+  if (fit.V.rows() >= s.target.rows()) {  // remeshing appends vertices; the template's keep their indices
+    const Eigen::VectorXd err = (fit.V.topRows(s.target.rows()) - s.target).rowwise().norm();
     double sum = 0;
     int n = 0;
     for (Eigen::Index v = 0; v < err.rows(); ++v)

@@ -151,7 +151,9 @@ TEST(TemplateFittingBadInput, ClearErrors) {
   p.max_normal_angle_deg = -3;
   EXPECT_THROW(fit.setParameters(p), InvalidInput);
   for (auto bad : {+[](FitParameters& q) { q.radius_steps = -1; }, +[](FitParameters& q) { q.freeze_iteration = -2; },
-                   +[](FitParameters& q) { q.relaxation = 0.5; }, +[](FitParameters& q) { q.relaxation = 2.0; }}) {
+                   +[](FitParameters& q) { q.relaxation = 0.5; }, +[](FitParameters& q) { q.relaxation = 2.0; },
+                   +[](FitParameters& q) { q.detail_rounds = -1; }, +[](FitParameters& q) { q.detail_iterations = 0; },
+                   +[](FitParameters& q) { q.detail_weight = 0; }}) {
     FitParameters q;
     bad(q);
     std::string why;

@@ -117,6 +117,41 @@ BinnedCloud bin_cloud(const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N, cons
   return b;
 }
 
+
+/// Target of §5.3 from kernel-weighted sums over a vertex's neighbourhood (Σw, Σw p, Σw ppᵀ):
+/// the weighted mean, or with `plane_fit` where the vertex's normal line meets the weighted
+/// least-squares plane (if well defined). Also returns the tangential offset of the mean from
+/// the normal line (the rim test). \pre sw > 0.
+Eigen::Vector3d kernel_target(const Eigen::Vector3d& vj, const Eigen::Vector3d& nj, double sw, const Eigen::Vector3d& sp,
+                              const Eigen::Matrix3d& spp, bool plane_fit, double in_ball, double* tangential_offset) {
+  Eigen::Vector3d q = sp / sw;  // weighted average of §5.3
+  *tangential_offset = ((q - vj) - (q - vj).dot(nj) * nj).norm();
+  if (plane_fit && in_ball >= 6) {
+    // weighted plane through q: the normal line of the vertex meets it at the projection
+    // (unbiased for one-sided neighbourhoods at the rim of the data)
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(spp / sw - q * q.transpose());
+    Eigen::Vector3d m = es.eigenvectors().col(0);
+    if (m.dot(nj) < 0) m = -m;
+    if (m.dot(nj) > 0.7 && es.eigenvalues()(1) > 4 * es.eigenvalues()(0)) q = vj + ((q - vj).dot(m) / m.dot(nj)) * nj;
+    else q = vj + (q - vj).dot(nj) * nj;
+  }
+  return q;
+}
+
+/// Kernel sums over the cloud points `nb` (index, squared distance) within radius rr of a vertex
+/// with normal nj: ROI points whose normals deviate at most θ_max (cos_max).
+void kernel_sums(const std::vector<std::pair<Eigen::Index, double>>& nb, const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N,
+                 const std::vector<char>& roi_ok, const Eigen::Vector3d& nj, double cos_max, double rr, double& sw,
+                 Eigen::Vector3d& sp, Eigen::Matrix3d& spp) {
+  for (const auto& [k, d2] : nb) {
+    if (!roi_ok[std::size_t(k)] || N.row(k).dot(nj) < cos_max) continue;
+    const double w = bspline_weight(std::sqrt(d2) / rr);
+    const Eigen::Vector3d pk = P.row(k).transpose();
+    sw += w;
+    sp += w * pk;
+    spp += w * pk * pk.transpose();
+  }
+}
 }  // namespace
 
 bool FitParameters::isValid(std::string* why) const {
@@ -135,6 +170,9 @@ bool FitParameters::isValid(std::string* why) const {
   if (!(subdivision_error >= 0)) return bad("subdivision_error must be >= 0 (0 = automatic)");
   if (!(fairing_lambda > 0 && fairing_lambda <= 1)) return bad("fairing_lambda must be in (0, 1]");
   if (fairing_steps < 0) return bad("fairing_steps must be >= 0");
+  if (detail_rounds < 0 || detail_rounds > 100) return bad("detail_rounds must be in 0..100");
+  if (detail_iterations < 1 || detail_iterations > 1000) return bad("detail_iterations must be in 1..1000");
+  if (!(detail_weight > 0)) return bad("detail_weight must be > 0");
   if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
   if (max_vertices < 4) return bad("max_vertices must be >= 4");
   return true;
@@ -433,29 +471,13 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
           } else {
             search.radius(vj, rr, nb);
             in_ball = double(nb.size());
-            for (const auto& [k, d2] : nb) {
-              if (!roi_ok[std::size_t(k)] || N.row(k).dot(nj) < cos_max) continue;
-              const double w = bspline_weight(std::sqrt(d2) / rr);
-              const Eigen::Vector3d pk = P.row(k).transpose();
-              sw += w;
-              sp += w * pk;
-              spp += w * pk * pk.transpose();
-            }
+            kernel_sums(nb, P, N, roi_ok, nj, cos_max, rr, sw, sp, spp);
           }
           if (sw <= 0) continue;
-          q = sp / sw;  // weighted average of §5.3
-          const Eigen::Vector3d off = (q - vj) - (q - vj).dot(nj) * nj;
-          if (u.plane_fit && in_ball >= 6) {
-            // weighted plane through q: the normal line of the vertex meets it at the projection
-            // (unbiased for one-sided neighbourhoods at the rim of the data)
-            Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(spp / sw - q * q.transpose());
-            Eigen::Vector3d m = es.eigenvectors().col(0);
-            if (m.dot(nj) < 0) m = -m;
-            if (m.dot(nj) > 0.7 && es.eigenvalues()(1) > 4 * es.eigenvalues()(0)) q = vj + ((q - vj).dot(m) / m.dot(nj)) * nj;
-            else q = vj + (q - vj).dot(nj) * nj;
-          }
+          double off = 0;
+          q = kernel_target(vj, nj, sw, sp, spp, u.plane_fit, in_ball, &off);
           // one-sided neighbourhood far beyond the rim of the data: no match
-          found = off.norm() <= u.rim_rejection * rr;
+          found = off <= u.rim_rejection * rr;
           used_r = rr;
           if (rr >= u.initial_match_distance) break;
         }
@@ -778,6 +800,79 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
     }
     rep.t_propagation = since(t0);
+  }
+
+  // ---- detail rounds (beyond the thesis; FitParameters::detail_rounds): §5.5.1's Laplacian
+  // updating after the §5.3 fit, with everything the data does not support held where the fit
+  // put it. Each round takes the Laplacian and differential coordinates of the current fit as
+  // the regularizer (so the template's detail no longer holds protrusions back), constrains the
+  // matched vertices to their §5.3 targets with detail_weight and every other vertex to its
+  // current position with match_weight (the semantic hole filling stays), factorizes once and
+  // iterates matching + back-substitution.
+  if (u.detail_rounds > 0 && (u.laplacian_updating || u.remeshing))
+    rep.message += "detail rounds skipped: Laplacian updating already regularizes with the current shape. ";
+  if (u.detail_rounds > 0 && u.max_iterations > 0 && !u.laplacian_updating && !u.remeshing) {
+    t0 = Clock::now();
+    report_progress(progress, 0.9, "detail rounds");
+    const double r = u.max_match_distance;
+    for (int round = 0; round < u.detail_rounds; ++round) {
+      TriMesh cur;
+      cur.V = V;
+      cur.F = F;
+      LaplacianDeformer Dd;
+      Dd.setMesh(cur);
+      Dd.setUseRotationField(false);
+      add_markers(Dd);
+      std::vector<int> ids(std::size_t(V.rows()), -1);
+      for (Eigen::Index j = 0; j < V.rows(); ++j) {
+        const bool data = status[std::size_t(j)] == VertexStatus::Matched;
+        const int id = Dd.addPositionConstraint(SurfacePoint::atVertex(int(j)), V.row(j).transpose(),
+                                                data ? u.detail_weight : u.match_weight);
+        if (data) ids[std::size_t(j)] = id;
+      }
+      int k = 0;
+      for (; k < u.detail_iterations; ++k) {
+        const Eigen::MatrixX3d VN = vertex_normals(V, F);
+        Eigen::MatrixX3d T = Eigen::MatrixX3d::Constant(V.rows(), 3, std::numeric_limits<double>::quiet_NaN());
+#pragma omp parallel
+        {
+          std::vector<std::pair<Eigen::Index, double>> nb;
+#pragma omp for schedule(dynamic, 256)
+          for (Eigen::Index j = 0; j < V.rows(); ++j) {
+            if (ids[std::size_t(j)] < 0) continue;
+            const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
+            if (nj.squaredNorm() == 0) continue;
+            search.radius(vj, r, nb);
+            double sw = 0, off = 0;
+            Eigen::Vector3d sp = Eigen::Vector3d::Zero();
+            Eigen::Matrix3d spp = Eigen::Matrix3d::Zero();
+            kernel_sums(nb, P, N, roi_ok, nj, cos_max, r, sw, sp, spp);
+            if (sw <= 0) continue;
+            const Eigen::Vector3d q = kernel_target(vj, nj, sw, sp, spp, u.plane_fit, double(nb.size()), &off);
+            if (off > u.rim_rejection * r) continue;
+            T.row(j) = (vj + std::clamp((q - vj).dot(nj), -r, r) * nj).transpose();
+          }
+        }
+        for (Eigen::Index j = 0; j < V.rows(); ++j)  // no data this time: the last target stays
+          if (ids[std::size_t(j)] >= 0 && T.row(j).allFinite()) Dd.setPositionTarget(ids[std::size_t(j)], T.row(j).transpose());
+        const Eigen::MatrixX3d Vn = Dd.deform();
+        // 99th percentile move of the data-supported vertices, as in stage 2
+        std::vector<double> mm;
+        for (Eigen::Index j = 0; j < V.rows(); ++j)
+          if (ids[std::size_t(j)] >= 0) mm.push_back((Vn.row(j) - V.row(j)).norm());
+        double move = 0;
+        if (!mm.empty()) {
+          const std::size_t q = std::size_t(0.99 * double(mm.size() - 1));
+          std::nth_element(mm.begin(), mm.begin() + long(q), mm.end());
+          move = mm[q];
+        }
+        V = Vn;
+        logger()->debug("[TemplateFitting] detail round {} iteration {}: 99th percentile move {:.3g}", round + 1, k + 1, move);
+        if (move < u.tolerance) { ++k; break; }
+      }
+      rep.detail_iterations_run += k;
+    }
+    rep.t_detail = since(t0);
   }
 
   // ---- fold repair (with fairing, §5.5.3): edges whose faces are bent back by more than 120°
