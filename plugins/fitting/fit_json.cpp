@@ -145,11 +145,12 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"radius_steps", u.radius_steps}, {"freeze_constraints", u.freeze_constraints},
                      {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation},
                      {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
-                     {"detail_weight", u.detail_weight}};
+                     {"detail_weight", u.detail_weight}, {"detail_surface_weight", u.detail_surface_weight}};
   j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
                  {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},
                  {"vertices", r.vertices}, {"faces", r.faces}, {"matched", r.matched}, {"propagated", r.propagated},
-                 {"masked", r.masked}, {"detail_iterations_run", r.detail_iterations_run}};
+                 {"masked", r.masked}, {"detail_iterations_run", r.detail_iterations_run},
+                 {"detail_surface_constraints", r.detail_surface_constraints}};
   j["metrics"] = {{"bbox_diagonal", r.bbox_diagonal}, {"point_spacing", r.point_spacing},
                   {"hausdorff", r.hausdorff}, {"hausdorff_relative", r.hausdorff_rel}, {"rms", r.rms},
                   {"mean", r.mean}, {"p99", r.p99}, {"coverage_vertices", r.coverage_vertices},

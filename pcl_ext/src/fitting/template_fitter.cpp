@@ -173,6 +173,7 @@ bool FitParameters::isValid(std::string* why) const {
   if (detail_rounds < 0 || detail_rounds > 100) return bad("detail_rounds must be in 0..100");
   if (detail_iterations < 1 || detail_iterations > 1000) return bad("detail_iterations must be in 1..1000");
   if (!(detail_weight > 0)) return bad("detail_weight must be > 0");
+  if (!(detail_surface_weight >= 0)) return bad("detail_surface_weight must be >= 0 (0 = off)");
   if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
   if (max_vertices < 4) return bad("max_vertices must be >= 4");
   return true;
@@ -806,9 +807,10 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // updating after the §5.3 fit, with everything the data does not support held where the fit
   // put it. Each round takes the Laplacian and differential coordinates of the current fit as
   // the regularizer (so the template's detail no longer holds protrusions back), constrains the
-  // matched vertices to their §5.3 targets with detail_weight and every other vertex to its
-  // current position with match_weight (the semantic hole filling stays), factorizes once and
-  // iterates matching + back-substitution.
+  // matched vertices to their §5.3 targets with detail_weight, every other vertex to its
+  // current position with match_weight (the semantic hole filling stays) and, with
+  // detail_surface_weight, faces to the cloud points that project onto them; it factorizes once
+  // and iterates matching + back-substitution.
   if (u.detail_rounds > 0 && (u.laplacian_updating || u.remeshing))
     rep.message += "detail rounds skipped: Laplacian updating already regularizes with the current shape. ";
   if (u.detail_rounds > 0 && u.max_iterations > 0 && !u.laplacian_updating && !u.remeshing) {
@@ -829,6 +831,37 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         const int id = Dd.addPositionConstraint(SurfacePoint::atVertex(int(j)), V.row(j).transpose(),
                                                 data ? u.detail_weight : u.match_weight);
         if (data) ids[std::size_t(j)] = id;
+      }
+      // data -> surface: each face onto which 3 or more cloud points (ROI, within r) project
+      // pulls its centroid by their mean residual. The vertex targets above move along the
+      // normals only; these also pull sideways where the data reach beyond the mesh (the tip
+      // of a protrusion projects onto the faces around the fit's tip vertex).
+      if (u.detail_surface_weight > 0) {
+        const MeshDistance md(V, F);
+        Eigen::MatrixX3d CP(np, 3);
+        Eigen::VectorXi CF = Eigen::VectorXi::Constant(np, -1);
+#pragma omp parallel for schedule(dynamic, 1024)
+        for (Eigen::Index i = 0; i < np; ++i) {
+          if (!roi_ok[std::size_t(i)]) continue;
+          int f = -1;
+          CP.row(i) = md.closest(P.row(i).transpose(), &f).transpose();
+          CF(i) = f;
+        }
+        Eigen::MatrixX3d rsum = Eigen::MatrixX3d::Zero(F.rows(), 3);
+        Eigen::VectorXi rcount = Eigen::VectorXi::Zero(F.rows());
+        for (Eigen::Index i = 0; i < np; ++i) {
+          const int f = CF(i);
+          if (f < 0 || (P.row(i) - CP.row(i)).norm() > r) continue;
+          rsum.row(f) += P.row(i) - CP.row(i);
+          ++rcount(f);
+        }
+        for (Eigen::Index f = 0; f < F.rows(); ++f) {
+          if (rcount(f) < 3) continue;
+          const Eigen::RowVector3d centroid = (V.row(F(f, 0)) + V.row(F(f, 1)) + V.row(F(f, 2))) / 3.0;
+          Dd.addPositionConstraint(SurfacePoint::onFace(int(f), Eigen::Vector3d::Constant(1.0 / 3)),
+                                   (centroid + rsum.row(f) / rcount(f)).transpose(), u.detail_surface_weight);
+          ++rep.detail_surface_constraints;
+        }
       }
       int k = 0;
       for (; k < u.detail_iterations; ++k) {

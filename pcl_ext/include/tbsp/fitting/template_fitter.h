@@ -114,12 +114,17 @@ struct FitParameters {
   /// the regularizer becomes the current fit's own Laplacian, so protrusions (ears, tips) are no
   /// longer held back by the template's detail, while the semantic hole filling stays. Each
   /// round is one factorization + up to `detail_iterations` matching / back-substitution steps
-  /// (stopping at `tolerance`). Keeps the template's connectivity. 0: off. Bunny ground truth
-  /// (docs/fitting.md): clean Hausdorff 0.86 → 0.44 % with 4 rounds, hole error unchanged;
-  /// armadillo 43k: +1.2 s per round. Ignored with laplacian_updating / remeshing.
+  /// (stopping at `tolerance`). Keeps the template's connectivity. 0: off. Bunny ground truth,
+  /// 30 markers (docs/fitting.md): clean Hausdorff 0.86 → 0.35 % with 4 rounds, hole error
+  /// unchanged; armadillo 43k / 100k points: 4.75 → 3.93 %, +1.5 s per round. Ignored with
+  /// laplacian_updating / remeshing (they already regularize with the current shape).
   int detail_rounds = 0;
   int detail_iterations = 8;            ///< per detail round
-  double detail_weight = 2;             ///< data weight of the detail rounds (held vertices: match_weight)
+  double detail_weight = 2;             ///< weight of the §5.3 vertex targets in detail rounds (held vertices: match_weight)
+  /// Weight of the data → surface constraints of the detail rounds: every face onto which 3 or
+  /// more cloud points project (within r_max) pulls its centroid by their mean residual — also
+  /// sideways, where the data reach beyond the mesh. 0: vertex targets only (0.35 → 0.45 % above).
+  double detail_surface_weight = 4;
   bool laplacian_updating = false;      ///< §5.5.1
   double updating_match_weight = 0.5;   ///< data weight with Laplacian updating
   bool remeshing = false;               ///< §5.5.2 (needs laplacian_updating; changes connectivity)
@@ -171,6 +176,7 @@ struct FitReport {
   double t_normals = 0, t_search = 0, t_initial = 0, t_scale = 0, t_iterations = 0, t_matching = 0,
          t_solve = 0, t_propagation = 0, t_detail = 0, t_remeshing = 0, t_fairing = 0, t_metrics = 0, t_total = 0;
   int detail_iterations_run = 0;         ///< matching / solve steps of the detail rounds, all rounds
+  Eigen::Index detail_surface_constraints = 0;  ///< data -> surface constraints, all detail rounds
 };
 
 /// \brief Fits `templ` to the cloud P (#P by 3) with normals N (#P by 3, or 0 rows: then they
