@@ -175,35 +175,53 @@ int count_local_folds(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, std:
     const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), c = V.row(F(f, 2)).transpose();
     A.row(f) = (b - a).cross(c - a).transpose();
   }
-  std::vector<std::vector<int>> vf(static_cast<std::size_t>(nv));
+  // faces per vertex, compressed (offsets + indices)
+  std::vector<int> off(std::size_t(nv) + 1, 0), vf(std::size_t(nf) * 3);
   for (Eigen::Index f = 0; f < nf; ++f)
-    for (int q = 0; q < 3; ++q) vf[std::size_t(F(f, q))].push_back(int(f));
-  const auto adj = vertex_adjacency(F, nv);
+    for (int q = 0; q < 3; ++q) ++off[std::size_t(F(f, q)) + 1];
+  for (Eigen::Index v = 0; v < nv; ++v) off[std::size_t(v) + 1] += off[std::size_t(v)];
+  {
+    std::vector<int> fill(off.begin(), off.end() - 1);
+    for (Eigen::Index f = 0; f < nf; ++f)
+      for (int q = 0; q < 3; ++q) vf[std::size_t(fill[std::size_t(F(f, q))]++)] = int(f);
+  }
   // per face: the area vectors of the distinct faces at the vertices within two rings of its
   // corners, summed
   std::vector<char> folded(std::size_t(nf), 0);
 #pragma omp parallel
   {
-    std::vector<Eigen::Index> vstamp(std::size_t(nv), -1), fstamp(std::size_t(nf), -1);
+    std::vector<int> vstamp(std::size_t(nv), -1), fstamp(std::size_t(nf), -1);
     std::vector<int> verts;
 #pragma omp for schedule(dynamic, 1024)
     for (Eigen::Index f = 0; f < nf; ++f) {
+      const int tag = int(f);
       verts.clear();
       for (int q = 0; q < 3; ++q) {
         const int v = F(f, q);
-        if (vstamp[std::size_t(v)] != f) { vstamp[std::size_t(v)] = f; verts.push_back(v); }
+        if (vstamp[std::size_t(v)] != tag) { vstamp[std::size_t(v)] = tag; verts.push_back(v); }
       }
-      for (int ring = 0; ring < 2; ++ring) {
+      for (int ring = 0; ring < 2; ++ring) {  // neighbours = the other corners of incident faces
         const std::size_t end = verts.size();
-        for (std::size_t k = 0; k < end; ++k)
-          for (int w : adj[std::size_t(verts[k])])
-            if (vstamp[std::size_t(w)] != f) { vstamp[std::size_t(w)] = f; verts.push_back(w); }
+        for (std::size_t k = 0; k < end; ++k) {
+          const int v = verts[k];
+          for (int i = off[std::size_t(v)]; i < off[std::size_t(v) + 1]; ++i)
+            for (int q = 0; q < 3; ++q) {
+              const int w = F(vf[std::size_t(i)], q);
+              if (vstamp[std::size_t(w)] != tag) { vstamp[std::size_t(w)] = tag; verts.push_back(w); }
+            }
+        }
       }
-      Eigen::RowVector3d m = Eigen::RowVector3d::Zero();
+      double mx = 0, my = 0, mz = 0;
       for (int v : verts)
-        for (int g : vf[std::size_t(v)])
-          if (fstamp[std::size_t(g)] != f) { fstamp[std::size_t(g)] = f; m += A.row(g); }
-      folded[std::size_t(f)] = A.row(f).dot(m) < 0;
+        for (int i = off[std::size_t(v)]; i < off[std::size_t(v) + 1]; ++i) {
+          const int g = vf[std::size_t(i)];
+          if (fstamp[std::size_t(g)] == tag) continue;
+          fstamp[std::size_t(g)] = tag;
+          mx += A(g, 0);
+          my += A(g, 1);
+          mz += A(g, 2);
+        }
+      folded[std::size_t(f)] = A(f, 0) * mx + A(f, 1) * my + A(f, 2) * mz < 0;
     }
   }
   if (face_mark) *face_mark = folded;

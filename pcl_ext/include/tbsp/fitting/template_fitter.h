@@ -170,7 +170,7 @@ struct FitReport {
   double coverage_points = 0;            ///< fraction of ROI points within r_max of the result
   int flipped_faces = 0;                 ///< faces whose normal opposes the cloud normals nearby
   int folded_edges = 0;                  ///< edges whose two faces are bent back by more than 120°
-  int local_folds = 0;                   ///< faces against their surroundings' normal (count_local_folds)
+  int local_folds = 0;                   ///< faces against their surroundings' normal (count_local_folds); -1: not computed (fairing off)
   int untangled_vertices = 0;            ///< vertices the fold repair re-placed (with fairing)
   // timings (s)
   double t_normals = 0, t_search = 0, t_initial = 0, t_scale = 0, t_iterations = 0, t_matching = 0,
