@@ -1,10 +1,13 @@
 // Template fitting (thesis ch. 5): results in the form of Table 5.1 and the speed benchmark
 // against PCL's Poisson reconstruction on the same cloud.
-//   ./build/bench/bench_fit [--no-poisson] [--repeat N] [--only WORD]
-// (--only: run just the rows whose model name contains WORD, e.g. armadillo)
+//   ./build/bench/bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N]
+//                           [--propagation-weight W]
+// (--only: run just the rows whose model name contains WORD, e.g. armadillo; --seed / --markers:
+// of the ground-truth scenarios (default 1 / 20); --propagation-weight: of every fit (default ½))
 // Times are the median of N runs (default 3; this machine is shared and noisy); the 43k row
 // also prints where the time goes (median stage times).
-// Rows (each GT scenario also with FitParameters::detail_rounds = 4): real single-view scan (Stanford bunny bun000.ply, template libigl bunny.off, same frame),
+// Rows (each GT scenario also with FitParameters::detail_rounds = 4): real single-view scan
+// (Stanford bunny bun000.ply, template libigl bunny.off, same frame),
 // ground-truth scenarios (known bend + twist + ×2 scale, noise, outliers, hole) on real meshes.
 #include <pcl/point_types.h>
 #include <pcl/search/kdtree.h>
@@ -74,15 +77,26 @@ int main(int argc, char** argv) {
   bool poisson = true;
   int repeat = 3;
   std::string only;
+  unsigned seed = 1;
+  int n_markers = 20;
+  FitParameters base;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--no-poisson") poisson = false;
     else if (a == "--repeat" && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
     else if (a == "--only" && i + 1 < argc) only = argv[++i];
+    else if (a == "--seed" && i + 1 < argc) seed = unsigned(std::atoi(argv[++i]));
+    else if (a == "--markers" && i + 1 < argc) n_markers = std::max(3, std::atoi(argv[++i]));
+    else if (a == "--propagation-weight" && i + 1 < argc) base.propagation_weight = std::atof(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N] [--only WORD]\n");
+      std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N] "
+                           "[--propagation-weight W]\n");
       return 2;
     }
+  }
+  if (!base.isValid()) {
+    std::fprintf(stderr, "bench_fit: --propagation-weight must be > 0\n");
+    return 2;
   }
   std::printf("| model | #marks | #verts | #pts | Hausdorff/diag (ROI) | p99/diag | iters | time s | notes |\n");
   std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---|\n");
@@ -117,7 +131,7 @@ int main(int argc, char** argv) {
       pick = int(arg);
     }
     TriMesh fit;
-    const FitReport r = timed_fit(repeat, t, P, Eigen::MatrixX3d(), markers, fit);
+    const FitReport r = timed_fit(repeat, t, P, Eigen::MatrixX3d(), markers, fit, nullptr, base);
     row("bunny, real scan bun000 (1 view)", markers.size(), t.V.rows(), P.rows(), r, "normals estimated; back side from the template");
   }
   // 2. ground truth scenarios on real meshes
@@ -128,10 +142,12 @@ int main(int argc, char** argv) {
     const TriMesh t = read_mesh(kData + c.path);
     synth::ScenarioOptions o;
     o.points = c.points;
+    o.seed = seed;
+    o.markers = n_markers;
     const synth::Scenario s = synth::make_scenario(t, o);
     TriMesh fit;
     std::vector<FitReport> all;
-    const FitReport r = timed_fit(repeat, s.templ, s.P, s.N, s.markers, fit, &all);
+    const FitReport r = timed_fit(repeat, s.templ, s.P, s.N, s.markers, fit, &all, base);
     const synth::ScenarioErrors e = synth::evaluate(s, fit);
     char note[256];
     std::snprintf(note, sizeof note, "clean Hausdorff %.3f%%; hole: surface %.3f%%; ROI incl. 10%% outliers", 100 * e.hausdorff_clean_rel,
@@ -140,7 +156,7 @@ int main(int argc, char** argv) {
     {
       // the same with 4 detail rounds (FitParameters::detail_rounds; not a default: it costs
       // a factorization and a cloud -> mesh projection per round)
-      FitParameters dp;
+      FitParameters dp = base;
       dp.detail_rounds = 4;
       TriMesh dfit;
       const FitReport dr = timed_fit(repeat, s.templ, s.P, s.N, s.markers, dfit, nullptr, dp);
