@@ -1,9 +1,10 @@
 // Template fitting (thesis ch. 5): results in the form of Table 5.1 and the speed benchmark
 // against PCL's Poisson reconstruction on the same cloud.
 //   ./build/bench/bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N]
-//                           [--propagation-weight W]
+//                           [--propagation-weight W] [--rim-rejection R]
 // (--only: run just the rows whose model name contains WORD, e.g. armadillo; --seed / --markers:
-// of the ground-truth scenarios (default 1 / 20); --propagation-weight: of every fit (default ½))
+// of the ground-truth scenarios (default 1 / 20); --propagation-weight, --rim-rejection: of every
+// fit (defaults ½, 0.5))
 // Times are the median of N runs (default 3; this machine is shared and noisy); the 43k row
 // also prints where the time goes (median stage times).
 // Rows (each GT scenario also with FitParameters::detail_rounds = 4): real single-view scan
@@ -88,14 +89,15 @@ int main(int argc, char** argv) {
     else if (a == "--seed" && i + 1 < argc) seed = unsigned(std::atoi(argv[++i]));
     else if (a == "--markers" && i + 1 < argc) n_markers = std::max(3, std::atoi(argv[++i]));
     else if (a == "--propagation-weight" && i + 1 < argc) base.propagation_weight = std::atof(argv[++i]);
+    else if (a == "--rim-rejection" && i + 1 < argc) base.rim_rejection = std::atof(argv[++i]);
     else {
       std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N] "
-                           "[--propagation-weight W]\n");
+                           "[--propagation-weight W] [--rim-rejection R]\n");
       return 2;
     }
   }
   if (!base.isValid()) {
-    std::fprintf(stderr, "bench_fit: --propagation-weight must be > 0\n");
+    std::fprintf(stderr, "bench_fit: --propagation-weight must be > 0, --rim-rejection in (0, 1]\n");
     return 2;
   }
   std::printf("| model | #marks | #verts | #pts | Hausdorff/diag (ROI) | p99/diag | iters | time s | notes |\n");

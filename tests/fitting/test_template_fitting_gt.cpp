@@ -77,8 +77,8 @@ TEST(TemplateFittingGroundTruth, BendTwistScaleNoiseOutliersHole) {
 }
 
 // Detail rounds (FitParameters::detail_rounds): Laplacian updating after the §5.3 fit with the
-// unsupported vertices held. The ear tips that the template's detail held back reach the data;
-// the hole (held) does not move.
+// unsupported vertices held and data -> surface constraints. The ear tips that the template's
+// detail held back reach the data; the hole (held) does not move.
 TEST(TemplateFittingGroundTruth, DetailRoundsSharpenProtrusionsAndKeepTheHole) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
   synth::ScenarioOptions opt;
@@ -91,13 +91,36 @@ TEST(TemplateFittingGroundTruth, DetailRoundsSharpenProtrusionsAndKeepTheHole) {
   const Outcome a = run(s, base);
   const Outcome b = run(s, detail);
   EXPECT_GT(b.report.detail_iterations_run, 0);
+  EXPECT_GT(b.report.detail_surface_constraints, 0);
   EXPECT_GT(b.report.t_detail, 0);
-  EXPECT_LE(b.err.hausdorff_clean_rel, 0.0055);                           // measured 0.448 % (0.864 % without)
-  EXPECT_LE(b.err.hausdorff_clean_rel, 0.65 * a.err.hausdorff_clean_rel);  // measured ratio 0.52
-  EXPECT_LE(b.clean_p99, a.clean_p99);
-  EXPECT_LE(b.err.hole_mean_rel, 0.0100);                                 // issue target; measured 0.984 %
+  EXPECT_LE(b.err.hausdorff_clean_rel, 0.0045);                           // measured 0.352 % (0.864 % without)
+  EXPECT_LE(b.err.hausdorff_clean_rel, 0.55 * a.err.hausdorff_clean_rel);  // measured ratio 0.41
+  EXPECT_LE(b.clean_p99, 0.6 * a.clean_p99);                              // measured 0.159 vs 0.359 %
+  EXPECT_LE(b.err.hole_mean_rel, 0.0100);                                 // issue target; measured 0.982 %
   EXPECT_NEAR(b.err.hole_mean_rel, a.err.hole_mean_rel, 0.0002);          // the hole is held
   EXPECT_EQ(b.flipped_vs_truth, 0);
+}
+
+// The accuracy setting of docs/fitting.md: detail rounds plus a stricter rim test (one-sided
+// neighbourhoods at the rim of the hole no longer pull hole vertices): closest to the issue's
+// targets (Hausdorff 0.3 %: not met; hole 1 %: met with a margin). Checked on the scenario's
+// seeds 1-4 in docs/fitting.md, not tuned to this one.
+TEST(TemplateFittingGroundTruth, AccuracySettingDetailRoundsAndStrictRim) {
+  TBSP_REQUIRE_FILE(test::shared(kBunny));
+  synth::ScenarioOptions opt;
+  opt.markers = 30;
+  const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
+  FitParameters p;
+  p.propagation_weight = 1.0;
+  p.detail_rounds = 4;
+  p.rim_rejection = 0.3;
+  const Outcome o = run(s, p);
+  EXPECT_NEAR(o.report.scale, 2.0, 0.1);
+  EXPECT_LE(o.err.hausdorff_clean_rel, 0.0040);  // issue target 0.3 %: NOT met, measured 0.322 %
+  EXPECT_LE(o.clean_p99, 0.0020);                // measured 0.15 %
+  EXPECT_LE(o.err.hole_mean_rel, 0.0095);        // issue target 1 %; measured 0.891 %
+  EXPECT_LE(o.hole_surface_mean, 0.0060);
+  EXPECT_EQ(o.flipped_vs_truth, 0);
 }
 
 TEST(TemplateFittingGroundTruth, TwentyMarkersThesisWeights) {
