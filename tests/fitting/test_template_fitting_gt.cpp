@@ -56,18 +56,27 @@ Outcome run(const synth::Scenario& s, const FitParameters& p = {}) {
               100 * o.err.hausdorff_noisy_rel, 100 * o.hole_surface_mean, 100 * o.err.hole_mean_rel, o.flipped_vs_truth);
   return o;
 }
+// the issue's scenario with its marker budget (30)
+synth::Scenario bunny_30_markers() {
+  synth::ScenarioOptions opt;
+  opt.markers = 30;
+  return synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
+}
+
+// the parameters of the 30-marker tests: propagation weight 1 (thesis: ½)
+FitParameters weight_one() {
+  FitParameters p;
+  p.propagation_weight = 1.0;
+  return p;
+}
 }  // namespace
 
 TEST(TemplateFittingGroundTruth, BendTwistScaleNoiseOutliersHole) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
-  synth::ScenarioOptions opt;
-  opt.markers = 30;  // the issue's budget
-  const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
+  const synth::Scenario s = bunny_30_markers();
   ASSERT_GE(s.hole_area_fraction, 0.25);
   ASSERT_LE(s.markers.size(), 30u);
-  FitParameters p;
-  p.propagation_weight = 1.0;  // thesis: 1/2
-  const Outcome o = run(s, p);
+  const Outcome o = run(s, weight_one());
   EXPECT_NEAR(o.report.scale, 2.0, 0.1);                 // §5.2 recovers the ×2
   EXPECT_LE(o.err.hole_mean_rel, 0.0100);                // issue target; measured 0.978 %
   EXPECT_LE(o.hole_surface_mean, 0.0100);                // measured 0.46 %: semantic hole filling
@@ -81,11 +90,8 @@ TEST(TemplateFittingGroundTruth, BendTwistScaleNoiseOutliersHole) {
 // detail held back reach the data; the hole (held) does not move.
 TEST(TemplateFittingGroundTruth, DetailRoundsSharpenProtrusionsAndKeepTheHole) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
-  synth::ScenarioOptions opt;
-  opt.markers = 30;
-  const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
-  FitParameters base;
-  base.propagation_weight = 1.0;
+  const synth::Scenario s = bunny_30_markers();
+  const FitParameters base = weight_one();
   FitParameters detail = base;
   detail.detail_rounds = 4;
   const Outcome a = run(s, base);
@@ -107,11 +113,8 @@ TEST(TemplateFittingGroundTruth, DetailRoundsSharpenProtrusionsAndKeepTheHole) {
 // seeds 1-4 in docs/fitting.md, not tuned to this one.
 TEST(TemplateFittingGroundTruth, AccuracySettingDetailRoundsAndStrictRim) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
-  synth::ScenarioOptions opt;
-  opt.markers = 30;
-  const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
-  FitParameters p;
-  p.propagation_weight = 1.0;
+  const synth::Scenario s = bunny_30_markers();
+  FitParameters p = weight_one();
   p.detail_rounds = 4;
   p.rim_rejection = 0.3;
   const Outcome o = run(s, p);
