@@ -68,6 +68,27 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   while (std::getline(sf, line)) lines += line.empty() || line[0] == '#' ? 0 : 1;
   EXPECT_EQ(lines, s.templ.V.rows());
   EXPECT_GT(std::filesystem::file_size(png), 1000u);
+  EXPECT_EQ(j["metrics"]["local_folds"].get<int>(), -1);  // computed with --fairing only
+  // detail rounds: same connectivity, the report says what they did, the fit is not worse
+  const std::string out2 = (dir / "fit_detail.ply").string(), rep2 = (dir / "r2.json").string();
+  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+                    " --out " + out2 + " --report " + rep2 + " --detail-rounds 2",
+                dir, &err),
+            0)
+      << err;
+  EXPECT_EQ(read_mesh(out2).F, s.templ.F);
+  nlohmann::json j2;
+  std::ifstream(rep2) >> j2;
+  EXPECT_EQ(j2["parameters"]["detail_rounds"].get<int>(), 2);
+  EXPECT_GT(j2["counts"]["detail_iterations_run"].get<int>(), 0);
+  EXPECT_GT(j2["counts"]["detail_surface_constraints"].get<long>(), 0);
+  EXPECT_GT(j2["timings_s"]["detail"].get<double>(), 0.0);
+  EXPECT_LE(j2["metrics"]["p99"].get<double>(), j["metrics"]["p99"].get<double>());
+  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+                    " --out " + out2 + " --detail-rounds -1",
+                dir, &err),
+            2);
+  EXPECT_NE(err.find("detail_rounds"), std::string::npos) << err;
   // bad input: a marker on a missing template vertex -> exit 2, message names it, output kept
   const auto before = std::filesystem::last_write_time(out);
   std::ofstream(dir / "bad.json") << R"({"markers": [{"template_vertex": 999999, "cloud_index": 0}]})";
