@@ -137,7 +137,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
   j["parameters"] = {{"max_match_distance", u.max_match_distance}, {"initial_match_distance", u.initial_match_distance},
                      {"max_normal_angle_deg", u.max_normal_angle_deg}, {"max_iterations", u.max_iterations},
                      {"tolerance", u.tolerance}, {"marker_weight", u.marker_weight}, {"match_weight", u.match_weight},
-                     {"propagation_weight", u.propagation_weight}, {"rim_rejection", u.rim_rejection},
+                     {"support_points", u.support_points}, {"propagation_weight", u.propagation_weight}, {"rim_rejection", u.rim_rejection},
                      {"plane_fit", u.plane_fit}, {"binned_matching", u.binned_matching}, {"rotation_field", u.rotation_field}, {"estimate_scale", u.estimate_scale},
                      {"propagate_displacements", u.propagate_displacements}, {"refine_rotations", u.refine_rotations},
                      {"laplacian_updating", u.laplacian_updating}, {"remeshing", u.remeshing},
@@ -145,7 +145,8 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"radius_steps", u.radius_steps}, {"freeze_constraints", u.freeze_constraints},
                      {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation},
                      {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
-                     {"detail_weight", u.detail_weight}, {"detail_surface_weight", u.detail_surface_weight}};
+                     {"detail_weight", u.detail_weight}, {"detail_surface_weight", u.detail_surface_weight},
+                     {"detail_marker_weight", u.detail_marker_weight}};
   j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
                  {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},
                  {"vertices", r.vertices}, {"faces", r.faces}, {"matched", r.matched}, {"propagated", r.propagated},

@@ -153,7 +153,8 @@ TEST(TemplateFittingBadInput, ClearErrors) {
   for (auto bad : {+[](FitParameters& q) { q.radius_steps = -1; }, +[](FitParameters& q) { q.freeze_iteration = -2; },
                    +[](FitParameters& q) { q.relaxation = 0.5; }, +[](FitParameters& q) { q.relaxation = 2.0; },
                    +[](FitParameters& q) { q.detail_rounds = -1; }, +[](FitParameters& q) { q.detail_iterations = 0; },
-                   +[](FitParameters& q) { q.detail_weight = 0; }}) {
+                   +[](FitParameters& q) { q.detail_weight = 0; }, +[](FitParameters& q) { q.detail_marker_weight = 0; },
+                   +[](FitParameters& q) { q.support_points = -1; }}) {
     FitParameters q;
     bad(q);
     std::string why;

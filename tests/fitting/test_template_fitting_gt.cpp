@@ -78,9 +78,9 @@ TEST(TemplateFittingGroundTruth, BendTwistScaleNoiseOutliersHole) {
   ASSERT_LE(s.markers.size(), 30u);
   const Outcome o = run(s, weight_one());
   EXPECT_NEAR(o.report.scale, 2.0, 0.1);                 // §5.2 recovers the ×2
-  EXPECT_LE(o.err.hole_mean_rel, 0.0100);                // issue target; measured 0.978 %
-  EXPECT_LE(o.hole_surface_mean, 0.0100);                // measured 0.46 %: semantic hole filling
-  EXPECT_LE(o.err.hausdorff_clean_rel, 0.0100);          // issue target 0.3 %: NOT met, measured 0.865 %
+  EXPECT_LE(o.err.hole_mean_rel, 0.0100);                // issue target; measured 0.895 %
+  EXPECT_LE(o.hole_surface_mean, 0.0100);                // measured 0.35 %: semantic hole filling
+  EXPECT_LE(o.err.hausdorff_clean_rel, 0.0100);          // issue target 0.3 %: NOT met, measured 0.864 %
   EXPECT_LE(o.clean_p99, 0.0040);                        // measured ~0.35 %
   EXPECT_EQ(o.flipped_vs_truth, 0);
 }
@@ -99,31 +99,54 @@ TEST(TemplateFittingGroundTruth, DetailRoundsSharpenProtrusionsAndKeepTheHole) {
   EXPECT_GT(b.report.detail_iterations_run, 0);
   EXPECT_GT(b.report.detail_surface_constraints, 0);
   EXPECT_GT(b.report.t_detail, 0);
-  EXPECT_LE(b.err.hausdorff_clean_rel, 0.0045);                           // measured 0.352 % (0.864 % without)
-  EXPECT_LE(b.err.hausdorff_clean_rel, 0.55 * a.err.hausdorff_clean_rel);  // measured ratio 0.41
-  EXPECT_LE(b.clean_p99, 0.6 * a.clean_p99);                              // measured 0.159 vs 0.359 %
-  EXPECT_LE(b.err.hole_mean_rel, 0.0100);                                 // issue target; measured 0.982 %
+  // issue target 0.3 %: measured 0.311 % (0.864 % without); seeds 2-6: 0.27-0.53 %
+  EXPECT_LE(b.err.hausdorff_clean_rel, 0.0040);
+  EXPECT_LE(b.err.hausdorff_clean_rel, 0.5 * a.err.hausdorff_clean_rel);   // measured ratio 0.36
+  EXPECT_LE(b.clean_p99, 0.6 * a.clean_p99);                              // measured 0.157 vs 0.357 %
+  EXPECT_LE(b.err.hole_mean_rel, 0.0100);                                 // issue target; measured 0.893 %
   EXPECT_NEAR(b.err.hole_mean_rel, a.err.hole_mean_rel, 0.0002);          // the hole is held
   EXPECT_EQ(b.flipped_vs_truth, 0);
 }
 
-// The accuracy setting of docs/fitting.md: detail rounds plus a stricter rim test (one-sided
-// neighbourhoods at the rim of the hole no longer pull hole vertices): closest to the issue's
-// targets (Hausdorff 0.3 %: not met; hole 1 %: met with a margin). Checked on the scenario's
-// seeds 1-4 in docs/fitting.md, not tuned to this one.
-TEST(TemplateFittingGroundTruth, AccuracySettingDetailRoundsAndStrictRim) {
+// The accuracy setting of docs/fitting.md (4 detail rounds) on two more seeds of the scenario:
+// the gain is not specific to seed 1. (A stricter rim test, the previous accuracy setting, is
+// no longer part of it: without noise it rejects the ear tips' matches, 0.21-0.37 % -> 0.47-1.7 %.)
+TEST(TemplateFittingGroundTruth, DetailRoundsOnOtherSeeds) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
-  const synth::Scenario s = bunny_30_markers();
-  FitParameters p = weight_one();
-  p.detail_rounds = 4;
-  p.rim_rejection = 0.3;
-  const Outcome o = run(s, p);
-  EXPECT_NEAR(o.report.scale, 2.0, 0.1);
-  EXPECT_LE(o.err.hausdorff_clean_rel, 0.0040);  // issue target 0.3 %: NOT met, measured 0.322 %
-  EXPECT_LE(o.clean_p99, 0.0020);                // measured 0.15 %
-  EXPECT_LE(o.err.hole_mean_rel, 0.0095);        // issue target 1 %; measured 0.891 %
-  EXPECT_LE(o.hole_surface_mean, 0.0060);
-  EXPECT_EQ(o.flipped_vs_truth, 0);
+  for (unsigned seed : {2u, 4u}) {
+    synth::ScenarioOptions opt;
+    opt.markers = 30;
+    opt.seed = seed;
+    const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
+    FitParameters p = weight_one();
+    p.detail_rounds = 4;
+    const Outcome o = run(s, p);
+    EXPECT_NEAR(o.report.scale, 2.0, 0.1) << "seed " << seed;
+    EXPECT_LE(o.err.hausdorff_clean_rel, 0.0045) << "seed " << seed;  // measured 0.274 / 0.374 % (defaults 0.92 / 0.75 %)
+    EXPECT_LE(o.clean_p99, 0.0020) << "seed " << seed;                // measured 0.16 %
+    EXPECT_LE(o.err.hole_mean_rel, 0.0100) << "seed " << seed;        // issue target; measured 0.821 / 0.913 %
+    EXPECT_EQ(o.flipped_vs_truth, 0) << "seed " << seed;
+  }
+}
+
+// FitParameters::support_points: matches backed by fewer than ~3 effective points count less
+// (inverse-variance weighting). One or two noisy points at the rim of the hole then no longer
+// set the rim vertices and, through the displacement propagation, the hole next to them.
+TEST(TemplateFittingGroundTruth, SparseSupportWeightingImprovesTheHoleFilling) {
+  TBSP_REQUIRE_FILE(test::shared(kBunny));
+  for (unsigned seed : {1u, 4u}) {
+    synth::ScenarioOptions opt;
+    opt.markers = 30;
+    opt.seed = seed;
+    const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
+    FitParameters off = weight_one();
+    off.support_points = 0;
+    const Outcome a = run(s, off);
+    const Outcome b = run(s, weight_one());  // default: 3
+    // measured 0.977 -> 0.895 % (seed 1), 1.064 -> 0.917 % (seed 4)
+    EXPECT_LE(b.err.hole_mean_rel, a.err.hole_mean_rel - 0.0005) << "seed " << seed;
+    EXPECT_LE(b.err.hausdorff_clean_rel, a.err.hausdorff_clean_rel + 0.0005) << "seed " << seed;  // 0.864 / 0.731 -> 0.864 / 0.752 %
+  }
 }
 
 TEST(TemplateFittingGroundTruth, TwentyMarkersThesisWeights) {
@@ -131,9 +154,9 @@ TEST(TemplateFittingGroundTruth, TwentyMarkersThesisWeights) {
   const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), {});
   const Outcome o = run(s);
   EXPECT_NEAR(o.report.scale, 2.0, 0.1);
-  EXPECT_LE(o.err.hausdorff_clean_rel, 0.0100);          // measured 0.834 %
-  EXPECT_LE(o.hole_surface_mean, 0.0100);                // measured 0.61 %
-  EXPECT_LE(o.err.hole_mean_rel, 0.0150);                // measured 1.22 %
+  EXPECT_LE(o.err.hausdorff_clean_rel, 0.0100);          // measured 0.845 %
+  EXPECT_LE(o.hole_surface_mean, 0.0100);                // measured 0.50 %
+  EXPECT_LE(o.err.hole_mean_rel, 0.0150);                // measured 1.08 %
   EXPECT_EQ(o.flipped_vs_truth, 0);
 }
 

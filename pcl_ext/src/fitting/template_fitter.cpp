@@ -142,12 +142,13 @@ Eigen::Vector3d kernel_target(const Eigen::Vector3d& vj, const Eigen::Vector3d& 
 /// with normal nj: ROI points whose normals deviate at most θ_max (cos_max).
 void kernel_sums(const std::vector<std::pair<Eigen::Index, double>>& nb, const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N,
                  const std::vector<char>& roi_ok, const Eigen::Vector3d& nj, double cos_max, double rr, double& sw,
-                 Eigen::Vector3d& sp, Eigen::Matrix3d& spp) {
+                 Eigen::Vector3d& sp, Eigen::Matrix3d& spp, double* sw2 = nullptr) {
   for (const auto& [k, d2] : nb) {
     if (!roi_ok[std::size_t(k)] || N.row(k).dot(nj) < cos_max) continue;
     const double w = bspline_weight(std::sqrt(d2) / rr);
     const Eigen::Vector3d pk = P.row(k).transpose();
     sw += w;
+    if (sw2) *sw2 += w * w;
     sp += w * pk;
     spp += w * pk * pk.transpose();
   }
@@ -173,6 +174,8 @@ bool FitParameters::isValid(std::string* why) const {
   if (detail_rounds < 0 || detail_rounds > 100) return bad("detail_rounds must be in 0..100");
   if (detail_iterations < 1 || detail_iterations > 1000) return bad("detail_iterations must be in 1..1000");
   if (!(detail_weight > 0)) return bad("detail_weight must be > 0");
+  if (!(detail_marker_weight > 0)) return bad("detail_marker_weight must be > 0");
+  if (!(support_points >= 0)) return bad("support_points must be >= 0 (0 = off)");
   if (!(detail_surface_weight >= 0)) return bad("detail_surface_weight must be >= 0 (0 = off)");
   if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
   if (max_vertices < 4) return bad("max_vertices must be >= 4");
@@ -305,17 +308,17 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   t0 = Clock::now();
   LaplacianDeformer D;
   D.setMesh(templ);
-  auto add_markers = [&](LaplacianDeformer& d) {
+  auto add_markers = [&](LaplacianDeformer& d, double weight) {
     for (std::size_t k = 0; k < markers.size(); ++k) {
       DeformConstraint c;
       c.at = SurfacePoint::atVertex(mverts[k]);
       c.target = mtarget[k];
-      c.weight = u.marker_weight * markers[k].weight;
+      c.weight = weight * markers[k].weight;
       c.rotation = markers[k].rotation;
       d.addConstraint(c);
     }
   };
-  add_markers(D);
+  add_markers(D, u.marker_weight);
   bool field = u.rotation_field;
   if (field) {
     std::set<int> distinct(mverts.begin(), mverts.end());
@@ -453,10 +456,11 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         // expanding search: the scheduled radius first (precision), then doubled up to the
         // initial radius for vertices the fit has not brought close to the data yet (reach)
         bool found = false;
+        double neff = 0;  // effective number of points of the accepted match
         Eigen::Vector3d q;
         double used_r = r;
         for (double rr = r; rr <= u.initial_match_distance * 1.0001 && !found; rr *= 2) {
-          double sw = 0, in_ball = 0;
+          double sw = 0, sw2 = 0, in_ball = 0;
           Eigen::Vector3d sp = Eigen::Vector3d::Zero();
           Eigen::Matrix3d spp = Eigen::Matrix3d::Zero();
           if (binned) {
@@ -466,19 +470,21 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
               if (binned->normal.row(k).dot(nj) < cos_max) continue;
               const double w = bspline_weight(std::sqrt(d2) / rr);
               sw += w * binned->count(k);
+              sw2 += w * w * binned->count(k);  // every point of a bin at the bin's weight
               sp += w * binned->sum_p.row(k).transpose();
               spp += w * binned->sum_pp[std::size_t(k)];
             }
           } else {
             search.radius(vj, rr, nb);
             in_ball = double(nb.size());
-            kernel_sums(nb, P, N, roi_ok, nj, cos_max, rr, sw, sp, spp);
+            kernel_sums(nb, P, N, roi_ok, nj, cos_max, rr, sw, sp, spp, &sw2);
           }
           if (sw <= 0) continue;
           double off = 0;
           q = kernel_target(vj, nj, sw, sp, spp, u.plane_fit, in_ball, &off);
           // one-sided neighbourhood far beyond the rim of the data: no match
           found = off <= u.rim_rejection * rr;
+          neff = sw * sw / sw2;
           used_r = rr;
           if (rr >= u.initial_match_distance) break;
         }
@@ -488,6 +494,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         const double d = std::clamp((q - vj).dot(nj), -r, r);
         target.row(j) = (vj + d * nj).transpose();
         match_scale(j) = (r / used_r) * (r / used_r);
+        // sparse support: weight ∝ n_eff (inverse variance of the mean of n_eff noisy points)
+        if (u.support_points > 0 && !u.laplacian_updating) match_scale(j) *= std::min(1.0, neff / u.support_points);
         matched[std::size_t(j)] = 1;
       }
     }
@@ -571,7 +579,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
     } else {
       D.clearConstraints();
-      add_markers(D);
+      add_markers(D, u.marker_weight);
       frozen_ids.assign(std::size_t(V.rows()), -1);
       for (Eigen::Index j = 0; j < V.rows(); ++j)
         if (matched[std::size_t(j)])
@@ -786,7 +794,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
       if (dense.rows() == V.rows()) {
         D.clearConstraints();
-        add_markers(D);
+        add_markers(D, u.marker_weight);
         for (Eigen::Index j = 0; j < V.rows(); ++j) {
           if (status[std::size_t(j)] == VertexStatus::Matched)
             D.addPositionConstraint(SurfacePoint::atVertex(int(j)), target.row(j).transpose(),
@@ -825,7 +833,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       cur.F = F;
       Dd.clearConstraints();
       Dd.setMesh(cur);
-      add_markers(Dd);
+      add_markers(Dd, u.detail_marker_weight);
       std::vector<int> ids(std::size_t(V.rows()), -1);
       for (Eigen::Index j = 0; j < V.rows(); ++j) {
         const bool data = status[std::size_t(j)] == VertexStatus::Matched;
