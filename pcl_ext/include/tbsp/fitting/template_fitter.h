@@ -125,8 +125,8 @@ struct FitParameters {
   /// longer held back by the template's detail, while the semantic hole filling stays. Each
   /// round is one factorization + up to `detail_iterations` matching / back-substitution steps
   /// (stopping at `tolerance`). Keeps the template's connectivity. 0: off. Bunny ground truth,
-  /// 30 markers (docs/fitting.md): clean Hausdorff 0.86 → 0.35 % with 4 rounds, hole error
-  /// unchanged; armadillo 43k / 100k points: 4.75 → 3.93 %, +1.5 s per round. Ignored with
+  /// 30 markers (docs/fitting.md): clean Hausdorff 0.86 → 0.31 % with 4 rounds, hole error
+  /// unchanged; armadillo 43k / 100k points: 4.78 → 3.91 %, +0.8 s per round. Ignored with
   /// laplacian_updating / remeshing (they already regularize with the current shape).
   int detail_rounds = 0;
   int detail_iterations = 8;            ///< per detail round
@@ -137,7 +137,7 @@ struct FitParameters {
   double detail_marker_weight = 1;
   /// Weight of the data → surface constraints of the detail rounds: every face onto which 3 or
   /// more cloud points project (within r_max) pulls its centroid by their mean residual — also
-  /// sideways, where the data reach beyond the mesh. 0: vertex targets only (0.35 → 0.45 % above).
+  /// sideways, where the data reach beyond the mesh. 0: vertex targets only (worse: 0.35 → 0.45 %).
   double detail_surface_weight = 4;
   bool laplacian_updating = false;      ///< §5.5.1
   double updating_match_weight = 0.5;   ///< data weight with Laplacian updating
