@@ -338,6 +338,8 @@ int main(int argc, char** argv) {
   fitc->add_flag("--remesh", fa.p.remeshing, "§5.5.2: adaptive subdivision (changes connectivity)");
   fitc->add_flag("--fairing", fa.p.fairing, "§5.5.3: tangential fairing against fold-overs");
   fitc->add_flag("--refine-rotations", fa.p.refine_rotations, "re-estimate the rotation field from the fit");
+  fitc->add_flag("--consistent-normals", fa.p.consistent_normals,
+                 "make estimated normals consistent between neighbours after orienting them by the template");
   fitc->add_flag("--no-propagation", fa.no_prop, "skip the displacement propagation of §5.3");
   fitc->add_flag("--no-scale", fa.no_scale, "skip the global scale of §5.2");
   fitc->add_flag("--no-rotation-field", fa.no_field, "skip the rotation field of §3.2.3");

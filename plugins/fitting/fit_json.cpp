@@ -146,9 +146,10 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation},
                      {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
                      {"detail_weight", u.detail_weight}, {"detail_surface_weight", u.detail_surface_weight},
-                     {"detail_marker_weight", u.detail_marker_weight}};
+                     {"detail_marker_weight", u.detail_marker_weight}, {"consistent_normals", u.consistent_normals}};
   j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
                  {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},
+                 {"normals_flipped_for_consistency", r.normals_flipped_for_consistency},
                  {"vertices", r.vertices}, {"faces", r.faces}, {"matched", r.matched}, {"propagated", r.propagated},
                  {"masked", r.masked}, {"detail_iterations_run", r.detail_iterations_run},
                  {"detail_surface_constraints", r.detail_surface_constraints}};

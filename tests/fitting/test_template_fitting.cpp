@@ -96,6 +96,27 @@ TYPED_TEST(TemplateFittingTyped, FitsASphereToAnEllipsoidScan) {
   EXPECT_EQ(pm.polygons.size(), std::size_t(templ.F.rows()));
 }
 
+// FitParameters::consistent_normals on a convex scan: the template's orientation is already
+// right everywhere, so nothing may change (the dumbbell of ConsistentNormals.* shows the fixes)
+TEST(TemplateFitting, ConsistentNormalsKeepACorrectOrientation) {
+  auto cloud = ellipsoid_cloud<pcl::PointXYZ>(20000, /*with_nan=*/false);
+  const TriMesh templ = make_icosphere(3, 1.0);
+  TemplateFitting<pcl::PointXYZ> fit;
+  fit.setInputCloud(cloud);
+  fit.setInputTemplate(templ);
+  fit.setMarkers(axis_markers(templ, *cloud));
+  TriMesh a, b;
+  const FitReport ra = fit.reconstruct(a);
+  FitParameters p;
+  p.consistent_normals = true;
+  fit.setParameters(p);
+  const FitReport rb = fit.reconstruct(b);
+  EXPECT_TRUE(rb.normals_estimated);
+  EXPECT_EQ(ra.normals_flipped_for_consistency, 0);
+  EXPECT_EQ(rb.normals_flipped_for_consistency, 0);
+  EXPECT_EQ(a.V, b.V);
+}
+
 TEST(TemplateFittingBadInput, ClearErrors) {
   const TriMesh templ = make_icosphere(2);
   TemplateFitting<pcl::PointNormal> fit;

@@ -18,6 +18,7 @@
 #include "tbsp/mesh/geodesics.h"
 #include "tbsp/mesh/mesh_validation.h"
 #include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/mesh/point_normals.h"
 #include "tbsp/mesh/point_search.h"
 #include "tbsp/mesh/remeshing.h"
 #include "tbsp/mesh/topology.h"
@@ -392,6 +393,20 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     for (Eigen::Index i = 0; i < np; ++i) {
       const Eigen::Index j = vt.nearest(P.row(i).transpose());
       if (j >= 0 && N.row(i).dot(VN.row(j)) < 0) N.row(i) *= -1;
+    }
+    if (u.consistent_normals) {
+      const auto tc = Clock::now();
+      Eigen::VectorXd confidence(np);
+#pragma omp parallel for schedule(static)
+      for (Eigen::Index i = 0; i < np; ++i) {
+        const Eigen::Index j = vt.nearest(P.row(i).transpose());
+        confidence(i) = j >= 0 ? std::abs(N.row(i).dot(VN.row(j))) : 0.0;
+      }
+      const NormalOrientationResult o = orient_normals_consistently(search, N, confidence, u.normal_neighbours);
+      rep.normals_flipped_for_consistency = o.flipped;
+      rep.t_normals += since(tc);
+      logger()->debug("[TemplateFitting] consistent normals: {} pairs, {} components, {} conflicts, {} flipped", o.edges,
+                      o.components, o.conflicts, o.flipped);
     }
   }
 
