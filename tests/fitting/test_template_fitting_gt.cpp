@@ -57,9 +57,10 @@ Outcome run(const synth::Scenario& s, const FitParameters& p = {}) {
   return o;
 }
 // the scenario with its marker budget (30)
-synth::Scenario bunny_30_markers() {
+synth::Scenario bunny_30_markers(unsigned seed = 1) {
   synth::ScenarioOptions opt;
   opt.markers = 30;
+  opt.seed = seed;
   return synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
 }
 
@@ -113,14 +114,10 @@ TEST(TemplateFittingGroundTruth, DetailRoundsSharpenProtrusionsAndKeepTheHole) {
 // no longer part of it: without noise it rejects the ear tips' matches, 0.21-0.37 % -> 0.47-1.7 %.)
 TEST(TemplateFittingGroundTruth, DetailRoundsOnOtherSeeds) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
+  FitParameters p = weight_one();
+  p.detail_rounds = 4;
   for (unsigned seed : {2u, 4u}) {
-    synth::ScenarioOptions opt;
-    opt.markers = 30;
-    opt.seed = seed;
-    const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
-    FitParameters p = weight_one();
-    p.detail_rounds = 4;
-    const Outcome o = run(s, p);
+    const Outcome o = run(bunny_30_markers(seed), p);
     EXPECT_NEAR(o.report.scale, 2.0, 0.1) << "seed " << seed;
     EXPECT_LE(o.err.hausdorff_clean_rel, 0.0045) << "seed " << seed;  // measured 0.274 / 0.374 % (defaults 0.92 / 0.75 %)
     EXPECT_LE(o.clean_p99, 0.0020) << "seed " << seed;                // measured 0.16 %
@@ -134,13 +131,10 @@ TEST(TemplateFittingGroundTruth, DetailRoundsOnOtherSeeds) {
 // set the rim vertices and, through the displacement propagation, the hole next to them.
 TEST(TemplateFittingGroundTruth, SparseSupportWeightingImprovesTheHoleFilling) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
+  FitParameters off = weight_one();
+  off.support_points = 0;
   for (unsigned seed : {1u, 4u}) {
-    synth::ScenarioOptions opt;
-    opt.markers = 30;
-    opt.seed = seed;
-    const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
-    FitParameters off = weight_one();
-    off.support_points = 0;
+    const synth::Scenario s = bunny_30_markers(seed);
     const Outcome a = run(s, off);
     const Outcome b = run(s, weight_one());  // default: 3
     // measured 0.977 -> 0.895 % (seed 1), 1.064 -> 0.917 % (seed 4)
