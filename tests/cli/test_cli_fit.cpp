@@ -72,7 +72,7 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   // detail rounds: same connectivity, the report says what they did, the fit is not worse
   const std::string out2 = (dir / "fit_detail.ply").string(), rep2 = (dir / "r2.json").string();
   ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
-                    " --out " + out2 + " --report " + rep2 + " --detail-rounds 2",
+                    " --out " + out2 + " --report " + rep2 + " --detail-rounds 2 --consistent-normals",
                 dir, &err),
             0)
       << err;
@@ -80,6 +80,8 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   nlohmann::json j2;
   std::ifstream(rep2) >> j2;
   EXPECT_EQ(j2["parameters"]["detail_rounds"].get<int>(), 2);
+  EXPECT_TRUE(j2["parameters"]["consistent_normals"].get<bool>());
+  EXPECT_EQ(j2["counts"]["normals_flipped_for_consistency"].get<long>(), 0);  // given normals are left alone
   EXPECT_GT(j2["counts"]["detail_iterations_run"].get<int>(), 0);
   EXPECT_GT(j2["counts"]["detail_surface_constraints"].get<long>(), 0);
   EXPECT_GT(j2["timings_s"]["detail"].get<double>(), 0.0);
