@@ -940,26 +940,20 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // ---- fold repair (with fairing, §5.5.3): edges whose faces are bent back by more than 120°
   // are fold-overs; their vertices and one-rings get umbrella smoothing steps until none is left
   // (at most 30 rounds); then small crumples (count_local_folds) are untangled; repeated while
-  // the untangling bends edges back (at most 3 passes)
-  auto flipped_faces = [&](const Eigen::MatrixX3d& X, std::vector<char>* mark) {
+  // the untangling bends edges back (at most 3 passes).
+  // (flipped_faces, for the report: faces whose normal is more than 120° against the cloud
+  // normal NR nearest to their centre)
+  auto flipped_faces = [&](const Eigen::MatrixX3d& X, const Eigen::MatrixX3d& NR) {
     const Eigen::MatrixX3d FN = face_normals(X, F);
-    std::vector<char> is_flipped(std::size_t(F.rows()), 0);
-#pragma omp parallel for schedule(dynamic, 1024)
+    int flipped = 0;
+#pragma omp parallel for schedule(dynamic, 1024) reduction(+ : flipped)
     for (Eigen::Index f = 0; f < F.rows(); ++f) {
       const Eigen::Vector3d c = (X.row(F(f, 0)) + X.row(F(f, 1)) + X.row(F(f, 2))).transpose() / 3.0;
       double d2 = 0;
       const Eigen::Index k = search.nearest(c, &d2);
-      is_flipped[std::size_t(f)] = k >= 0 && roi_ok[std::size_t(k)] && d2 < u.max_match_distance * u.max_match_distance &&
-                                   FN.row(f).dot(N.row(k)) < -0.5;
+      flipped += k >= 0 && roi_ok[std::size_t(k)] && d2 < u.max_match_distance * u.max_match_distance &&
+                 FN.row(f).dot(NR.row(k)) < -0.5;
     }
-    int flipped = 0;
-    if (mark) mark->assign(std::size_t(X.rows()), 0);
-    for (Eigen::Index f = 0; f < F.rows(); ++f)
-      if (is_flipped[std::size_t(f)]) {
-        ++flipped;
-        if (mark)
-          for (int q = 0; q < 3; ++q) (*mark)[std::size_t(F(f, q))] = 1;
-      }
     return flipped;
   };
   auto folded_edges = [&](const Eigen::MatrixX3d& X, std::vector<char>* mark) {
@@ -1038,9 +1032,16 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     std::nth_element(s.begin(), s.begin() + long(0.99 * double(nq - 1)), s.end());
     rep.p99 = s[std::size_t(0.99 * double(nq - 1))];
     rep.coverage_points = double((dist.array() <= u.max_match_distance).count()) / double(nq);
-    // fold-overs: face normal against the cloud normals near the face centre
-    const int flipped = flipped_faces(V, nullptr);
-    rep.flipped_faces = flipped;
+    // fold-overs: face normal against the cloud normals near the face centre. Estimated normals
+    // are first made consistent for this count (unless the fit already did): a patch the
+    // template oriented inwards (a sphere over a concave ledge) is not a patch of flipped faces.
+    if (rep.normals_estimated && !u.consistent_normals) {
+      Eigen::MatrixX3d NC = N;
+      orient_normals_consistently(search, NC, Eigen::VectorXd::Ones(np), u.normal_neighbours);
+      rep.flipped_faces = flipped_faces(V, NC);
+    } else {
+      rep.flipped_faces = flipped_faces(V, N);
+    }
     rep.folded_edges = folded_edges(V, nullptr);
     rep.local_folds = u.fairing ? count_local_folds(V, F) : -1;  // 0.11 s on 86k faces: with the fold repair only
     if (u.fairing && rep.local_folds > 0)

@@ -153,9 +153,10 @@ struct FitParameters {
   /// points the other way (a sphere over a concave ledge) whole patches come out inwards. With
   /// this switch they are then made consistent between neighbours, per connected part the way
   /// the template agrees with more (orient_normals_consistently, mesh/point_normals.h). Sphere →
-  /// Igea: 94 of 134k points corrected, the report's `flipped_faces` 495 → 2, but the fit then
-  /// also matches the concave ledge and the updating-weight sweep gives 0.41–0.59 % instead of
-  /// 0.43–0.48 % (docs/fitting.md), so it is off by default. Given normals are left alone.
+  /// Igea: 94 of 134k points corrected, but the fit then also matches the concave ledge and the
+  /// updating-weight sweep gives 0.41–0.59 % instead of 0.43–0.48 % (docs/fitting.md), so it is
+  /// off by default. (The report's flipped_faces uses consistent normals either way.) Given
+  /// normals are left alone.
   bool consistent_normals = false;
 
   /// Checks ranges; fills `why` with the first problem.
@@ -192,7 +193,9 @@ struct FitReport {
   double hausdorff = 0, hausdorff_rel = 0, rms = 0, mean = 0, p99 = 0;
   double coverage_vertices = 0;          ///< fraction of (non-masked) template vertices matched
   double coverage_points = 0;            ///< fraction of ROI points within r_max of the result
-  int flipped_faces = 0;                 ///< faces whose normal opposes the cloud normals nearby
+  /// faces more than 120° against the cloud normal nearest to their centre (within r_max);
+  /// estimated normals are made consistent for this count (orient_normals_consistently)
+  int flipped_faces = 0;
   int folded_edges = 0;                  ///< edges whose two faces are bent back by more than 120°
   int local_folds = 0;                   ///< faces against their surroundings' normal (count_local_folds); -1: not computed (fairing off)
   int untangled_vertices = 0;            ///< vertices the fold repair re-placed (with fairing)
