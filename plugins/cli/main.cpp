@@ -80,7 +80,7 @@ int cmd_deform(const DeformArgs& a) {
 struct FitArgs {
   std::string templ, cloud, markers, out, status, report, roi, png;
   tbsp::FitParameters p;
-  bool no_prop = false, no_scale = false, no_field = false, quiet = false;
+  bool no_prop = false, no_scale = false, no_field = false, quiet = false, kernel_detail = false;
 };
 
 int cmd_fit(FitArgs a) {
@@ -94,6 +94,7 @@ int cmd_fit(FitArgs a) {
   a.p.propagate_displacements = !a.no_prop;
   a.p.estimate_scale = !a.no_scale;
   a.p.rotation_field = !a.no_field;
+  a.p.detail_residual_matching = !a.kernel_detail;
   tbsp::cli::ProgressBar bar(!a.quiet);
   tbsp::TriMesh out;
   tbsp::FitReport rep;
@@ -334,6 +335,12 @@ int main(int argc, char** argv) {
   fitc->add_option("--match-weight", fa.p.match_weight, "weight of data constraints");
   fitc->add_option("--detail-rounds", fa.p.detail_rounds,
                    "rounds of Laplacian updating after the fit, unsupported vertices held (sharper protrusions; 0 = off)");
+  fitc->add_option("--detail-radius-factor", fa.p.detail_radius_factor,
+                   "kernel radius of the detail rounds' residual matching, x r_max (default 2)");
+  fitc->add_option("--detail-surface-weight", fa.p.detail_surface_weight,
+                   "weight of the detail rounds' per-face data constraints (default 0 = off)");
+  fitc->add_flag("--detail-kernel-targets", fa.kernel_detail,
+                 "detail rounds: the §5.3 kernel targets along the normals instead of residual matching");
   fitc->add_flag("--laplacian-updating", fa.p.laplacian_updating, "§5.5.1: rebuild the Laplacian each iteration");
   fitc->add_flag("--remesh", fa.p.remeshing, "§5.5.2: adaptive subdivision (changes connectivity)");
   fitc->add_flag("--fairing", fa.p.fairing, "§5.5.3: tangential fairing against fold-overs");

@@ -146,13 +146,15 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation},
                      {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
                      {"detail_weight", u.detail_weight}, {"detail_surface_weight", u.detail_surface_weight},
+                     {"detail_residual_matching", u.detail_residual_matching}, {"detail_radius_factor", u.detail_radius_factor},
                      {"detail_marker_weight", u.detail_marker_weight}, {"consistent_normals", u.consistent_normals}};
   j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
                  {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},
                  {"normals_flipped_for_consistency", r.normals_flipped_for_consistency},
                  {"vertices", r.vertices}, {"faces", r.faces}, {"matched", r.matched}, {"propagated", r.propagated},
                  {"masked", r.masked}, {"detail_iterations_run", r.detail_iterations_run},
-                 {"detail_surface_constraints", r.detail_surface_constraints}};
+                 {"detail_surface_constraints", r.detail_surface_constraints},
+                 {"detail_points_tracked", r.detail_points_tracked}};
   j["metrics"] = {{"bbox_diagonal", r.bbox_diagonal}, {"point_spacing", r.point_spacing},
                   {"hausdorff", r.hausdorff}, {"hausdorff_relative", r.hausdorff_rel}, {"rms", r.rms},
                   {"mean", r.mean}, {"p99", r.p99}, {"coverage_vertices", r.coverage_vertices},

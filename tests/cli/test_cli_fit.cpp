@@ -83,7 +83,10 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_TRUE(j2["parameters"]["consistent_normals"].get<bool>());
   EXPECT_EQ(j2["counts"]["normals_flipped_for_consistency"].get<long>(), 0);  // given normals are left alone
   EXPECT_GT(j2["counts"]["detail_iterations_run"].get<int>(), 0);
-  EXPECT_GT(j2["counts"]["detail_surface_constraints"].get<long>(), 0);
+  EXPECT_TRUE(j2["parameters"]["detail_residual_matching"].get<bool>());
+  EXPECT_DOUBLE_EQ(j2["parameters"]["detail_radius_factor"].get<double>(), 2.0);
+  EXPECT_GT(j2["counts"]["detail_points_tracked"].get<long>(), 0);
+  EXPECT_EQ(j2["counts"]["detail_surface_constraints"].get<long>(), 0);  // off by default
   EXPECT_GT(j2["timings_s"]["detail"].get<double>(), 0.0);
   EXPECT_LE(j2["metrics"]["p99"].get<double>(), j["metrics"]["p99"].get<double>());
   EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
@@ -91,6 +94,23 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
                 dir, &err),
             2);
   EXPECT_NE(err.find("detail_rounds"), std::string::npos) << err;
+  // the previous detail matching (§5.3 kernel targets + per-face constraints) stays selectable
+  const std::string rep3 = (dir / "r3.json").string();
+  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+                    " --out " + out2 + " --report " + rep3 + " --detail-rounds 1 --detail-kernel-targets --detail-surface-weight 4",
+                dir, &err),
+            0)
+      << err;
+  nlohmann::json j3;
+  std::ifstream(rep3) >> j3;
+  EXPECT_FALSE(j3["parameters"]["detail_residual_matching"].get<bool>());
+  EXPECT_EQ(j3["counts"]["detail_points_tracked"].get<long>(), 0);
+  EXPECT_GT(j3["counts"]["detail_surface_constraints"].get<long>(), 0);
+  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+                    " --out " + out2 + " --detail-rounds 1 --detail-radius-factor 0.1",
+                dir, &err),
+            2);
+  EXPECT_NE(err.find("detail_radius_factor"), std::string::npos) << err;
   // bad input: a marker on a missing template vertex -> exit 2, message names it, output kept
   const auto before = std::filesystem::last_write_time(out);
   std::ofstream(dir / "bad.json") << R"({"markers": [{"template_vertex": 999999, "cloud_index": 0}]})";

@@ -175,6 +175,7 @@ TEST(TemplateFittingBadInput, ClearErrors) {
                    +[](FitParameters& q) { q.relaxation = 0.5; }, +[](FitParameters& q) { q.relaxation = 2.0; },
                    +[](FitParameters& q) { q.detail_rounds = -1; }, +[](FitParameters& q) { q.detail_iterations = 0; },
                    +[](FitParameters& q) { q.detail_weight = 0; }, +[](FitParameters& q) { q.detail_marker_weight = 0; },
+                   +[](FitParameters& q) { q.detail_radius_factor = 0.1; }, +[](FitParameters& q) { q.detail_radius_factor = NAN; },
                    +[](FitParameters& q) { q.support_points = -1; }}) {
     FitParameters q;
     bad(q);

@@ -139,6 +139,39 @@ Eigen::Vector3d kernel_target(const Eigen::Vector3d& vj, const Eigen::Vector3d& 
   return q;
 }
 
+/// Closest point to p on triangle abc (Ericson, Real-Time Collision Detection §5.1.5), as
+/// barycentric weights of a, b, c.
+Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                    const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return Eigen::Vector3d(1, 0, 0);
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return Eigen::Vector3d(0, 1, 0);
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double v = d1 / (d1 - d3);
+    return Eigen::Vector3d(1 - v, v, 0);
+  }
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return Eigen::Vector3d(0, 0, 1);
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double w = d2 / (d2 - d6);
+    return Eigen::Vector3d(1 - w, 0, w);
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return Eigen::Vector3d(0, 1 - w, w);
+  }
+  const double denom = 1 / (va + vb + vc);
+  const double v = vb * denom, w = vc * denom;
+  return Eigen::Vector3d(1 - v - w, v, w);
+}
+
 /// Kernel sums over the cloud points `nb` (index, squared distance) within radius rr of a vertex
 /// with normal nj: ROI points whose normals deviate at most θ_max (cos_max).
 void kernel_sums(const std::vector<std::pair<Eigen::Index, double>>& nb, const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N,
@@ -176,6 +209,7 @@ bool FitParameters::isValid(std::string* why) const {
   if (detail_iterations < 1 || detail_iterations > 1000) return bad("detail_iterations must be in 1..1000");
   if (!(detail_weight > 0)) return bad("detail_weight must be > 0");
   if (!(detail_marker_weight > 0)) return bad("detail_marker_weight must be > 0");
+  if (!(detail_radius_factor >= 0.5 && detail_radius_factor <= 10)) return bad("detail_radius_factor must be in [0.5, 10]");
   if (!(support_points >= 0)) return bad("support_points must be >= 0 (0 = off)");
   if (!(detail_surface_weight >= 0)) return bad("detail_surface_weight must be >= 0 (0 = off)");
   if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
@@ -830,7 +864,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // updating after the §5.3 fit, with everything the data does not support held where the fit
   // put it. Each round takes the Laplacian and differential coordinates of the current fit as
   // the regularizer (so the template's detail no longer holds protrusions back), constrains the
-  // matched vertices to their §5.3 targets with detail_weight, every other vertex to its
+  // matched vertices to data targets with detail_weight — the kernel mean of the data -> fit
+  // residuals (detail_residual_matching) or the §5.3 kernel targets — every other vertex to its
   // current position with match_weight (the semantic hole filling stays) and, with
   // detail_surface_weight, faces to the cloud points that project onto them; it factorizes once
   // and iterates matching + back-substitution.
@@ -840,6 +875,10 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     t0 = Clock::now();
     report_progress(progress, 0.9, "detail rounds");
     const double r = u.max_match_distance;
+    const double rd = u.detail_radius_factor * r;  // kernel radius of the residual matching
+    std::vector<std::vector<int>> vf(std::size_t(V.rows()));  // faces around each vertex
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+      for (int c = 0; c < 3; ++c) vf[std::size_t(F(f, c))].push_back(int(f));
     LaplacianDeformer Dd;  // one for all rounds: the solver keeps its symbolic analysis
     Dd.setUseRotationField(false);
     for (int round = 0; round < u.detail_rounds; ++round) {
@@ -849,18 +888,78 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       Dd.clearConstraints();
       Dd.setMesh(cur);
       add_markers(Dd, u.detail_marker_weight);
+      const auto t_round = Clock::now();
+      // residual matching: every ROI point's closest point on the fit, as a face and barycentric
+      // weights, found at the start of the round and then updated among the faces around the
+      // last one after each solve (the fit moves little per iteration). Points farther than 3 r
+      // are not tracked; the kernel below skips those farther than r (outliers, other surfaces).
+      std::vector<Eigen::Index> rk;  // cloud index of each tracked point
+      std::vector<int> rf;           // its closest face
+      Eigen::MatrixX3d rb;           // and the barycentric weights of its closest point
+      if (u.detail_residual_matching) {
+        const MeshDistance md(V, F);
+        std::vector<int> face(std::size_t(np), -1);
+#pragma omp parallel for schedule(dynamic, 1024)
+        for (Eigen::Index i = 0; i < np; ++i) {
+          if (!roi_ok[std::size_t(i)]) continue;
+          int f = -1;
+          const Eigen::Vector3d p = P.row(i).transpose();
+          if ((md.closest(p, &f) - p).norm() <= 3 * r) face[std::size_t(i)] = f;
+        }
+        for (Eigen::Index i = 0; i < np; ++i)
+          if (face[std::size_t(i)] >= 0) { rk.push_back(i); rf.push_back(face[std::size_t(i)]); }
+        rb.resize(Eigen::Index(rk.size()), 3);
+        for (std::size_t t = 0; t < rk.size(); ++t) {
+          const int f = rf[t];
+          rb.row(Eigen::Index(t)) = closest_on_triangle(P.row(rk[t]).transpose(), V.row(F(f, 0)).transpose(),
+                                                        V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose()).transpose();
+        }
+      }
+      // sparse support, as in stage 2: a vertex whose residual kernel holds fewer than
+      // support_points × (r_d / r)² effective points (the count stage 2's kernel would see in the
+      // same patch) gets least-squares weight ∝ n_eff — at the rim of holes one or two noisy
+      // points otherwise pull it off the surface
+      Eigen::VectorXd dscale = Eigen::VectorXd::Ones(V.rows());
+      if (u.detail_residual_matching && u.support_points > 0) {
+        const double need = u.support_points * (rd / r) * (rd / r);
+        const Eigen::MatrixX3d VN = vertex_normals(V, F);
+        Eigen::MatrixX3d C(Eigen::Index(rk.size()), 3);
+        for (Eigen::Index t = 0; t < C.rows(); ++t) {
+          const int f = rf[std::size_t(t)];
+          C.row(t) = rb(t, 0) * V.row(F(f, 0)) + rb(t, 1) * V.row(F(f, 1)) + rb(t, 2) * V.row(F(f, 2));
+        }
+        const PointSearch csearch(C);
+#pragma omp parallel
+        {
+          std::vector<std::pair<Eigen::Index, double>> nb;
+#pragma omp for schedule(dynamic, 256)
+          for (Eigen::Index j = 0; j < V.rows(); ++j) {
+            if (status[std::size_t(j)] != VertexStatus::Matched) continue;
+            const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
+            csearch.radius(vj, rd, nb);
+            double sw = 0, sw2 = 0;
+            for (const auto& [t, d2] : nb) {
+              const Eigen::Index ci = rk[std::size_t(t)];
+              if (N.row(ci).dot(nj) < cos_max || (P.row(ci) - C.row(t)).squaredNorm() > r * r) continue;
+              const double w = bspline_weight(std::sqrt(d2) / rd);
+              sw += w;
+              sw2 += w * w;
+            }
+            dscale(j) = sw2 > 0 ? std::min(1.0, sw * sw / sw2 / need) : 1.0;
+          }
+        }
+      }
       std::vector<int> ids(std::size_t(V.rows()), -1);
       for (Eigen::Index j = 0; j < V.rows(); ++j) {
         const bool data = status[std::size_t(j)] == VertexStatus::Matched;
         const int id = Dd.addPositionConstraint(SurfacePoint::atVertex(int(j)), V.row(j).transpose(),
-                                                data ? u.detail_weight : u.match_weight);
+                                                data ? u.detail_weight * std::sqrt(dscale(j)) : u.match_weight);
         if (data) ids[std::size_t(j)] = id;
       }
       // data -> surface: each face onto which 3 or more cloud points (ROI, within r) project
       // pulls its centroid by their mean residual. The vertex targets above move along the
       // normals only; these also pull sideways where the data reach beyond the mesh (the tip
       // of a protrusion projects onto the faces around the fit's tip vertex).
-      const auto t_round = Clock::now();
       if (u.detail_surface_weight > 0) {
         const MeshDistance md(V, F);
         Eigen::MatrixX3d CP(np, 3);
@@ -888,29 +987,84 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
           ++rep.detail_surface_constraints;
         }
       }
-      logger()->trace("[TemplateFitting] detail round {}: set-up {:.3f} s ({} data -> surface constraints)", round + 1,
-                      since(t_round), rep.detail_surface_constraints);
+      rep.detail_points_tracked = Eigen::Index(rk.size());
+      logger()->trace("[TemplateFitting] detail round {}: set-up {:.3f} s ({} data -> surface constraints, {} points tracked)",
+                      round + 1, since(t_round), rep.detail_surface_constraints, rk.size());
       int k = 0;
       for (; k < u.detail_iterations; ++k) {
         const Eigen::MatrixX3d VN = vertex_normals(V, F);
         Eigen::MatrixX3d T = Eigen::MatrixX3d::Constant(V.rows(), 3, std::numeric_limits<double>::quiet_NaN());
+        if (u.detail_residual_matching) {
+          if (k > 0) {
+            // the fit moved a little: each point's closest point among the faces around its last one
+#pragma omp parallel for schedule(dynamic, 1024)
+            for (Eigen::Index t = 0; t < Eigen::Index(rk.size()); ++t) {
+              const Eigen::Vector3d p = P.row(rk[std::size_t(t)]).transpose();
+              const int f0 = rf[std::size_t(t)];
+              double best = std::numeric_limits<double>::infinity();
+              for (int c = 0; c < 3; ++c)
+                for (int f : vf[std::size_t(F(f0, c))]) {
+                  const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), e = V.row(F(f, 2)).transpose();
+                  const Eigen::Vector3d w = closest_on_triangle(p, a, b, e);
+                  const double d2 = (p - (w(0) * a + w(1) * b + w(2) * e)).squaredNorm();
+                  if (d2 < best) { best = d2; rf[std::size_t(t)] = f; rb.row(t) = w.transpose(); }
+                }
+            }
+          }
+          // target = vertex + kernel-weighted mean of the residuals p_k - c_k of the points whose
+          // closest point c_k on the fit lies within r_d of the vertex (normals within θ_max)
+          const Eigen::Index nt = Eigen::Index(rk.size());
+          Eigen::MatrixX3d C(nt, 3);
+          for (Eigen::Index t = 0; t < nt; ++t) {
+            const int f = rf[std::size_t(t)];
+            C.row(t) = rb(t, 0) * V.row(F(f, 0)) + rb(t, 1) * V.row(F(f, 1)) + rb(t, 2) * V.row(F(f, 2));
+          }
+          const PointSearch csearch(C);
 #pragma omp parallel
-        {
-          std::vector<std::pair<Eigen::Index, double>> nb;
+          {
+            std::vector<std::pair<Eigen::Index, double>> nb;
 #pragma omp for schedule(dynamic, 256)
-          for (Eigen::Index j = 0; j < V.rows(); ++j) {
-            if (ids[std::size_t(j)] < 0) continue;
-            const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
-            if (nj.squaredNorm() == 0) continue;
-            search.radius(vj, r, nb);
-            double sw = 0, off = 0;
-            Eigen::Vector3d sp = Eigen::Vector3d::Zero();
-            Eigen::Matrix3d spp = Eigen::Matrix3d::Zero();
-            kernel_sums(nb, P, N, roi_ok, nj, cos_max, r, sw, sp, spp);
-            if (sw <= 0) continue;
-            const Eigen::Vector3d q = kernel_target(vj, nj, sw, sp, spp, u.plane_fit, double(nb.size()), &off);
-            if (off > u.rim_rejection * r) continue;
-            T.row(j) = (vj + std::clamp((q - vj).dot(nj), -r, r) * nj).transpose();
+            for (Eigen::Index j = 0; j < V.rows(); ++j) {
+              if (ids[std::size_t(j)] < 0) continue;
+              const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
+              if (nj.squaredNorm() == 0) continue;
+              csearch.radius(vj, rd, nb);
+              double sw = 0;
+              Eigen::Vector3d sr = Eigen::Vector3d::Zero();
+              for (const auto& [t, d2] : nb) {
+                const Eigen::Index ci = rk[std::size_t(t)];
+                if (N.row(ci).dot(nj) < cos_max) continue;
+                const Eigen::Vector3d res = (P.row(ci) - C.row(t)).transpose();
+                if (res.squaredNorm() > r * r) continue;
+                const double w = bspline_weight(std::sqrt(d2) / rd);
+                sw += w;
+                sr += w * res;
+              }
+              if (sw <= 0) continue;
+              Eigen::Vector3d m = sr / sw;
+              if (m.norm() > r) m *= r / m.norm();
+              T.row(j) = (vj + m).transpose();
+            }
+          }
+        } else {
+#pragma omp parallel
+          {
+            std::vector<std::pair<Eigen::Index, double>> nb;
+#pragma omp for schedule(dynamic, 256)
+            for (Eigen::Index j = 0; j < V.rows(); ++j) {
+              if (ids[std::size_t(j)] < 0) continue;
+              const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
+              if (nj.squaredNorm() == 0) continue;
+              search.radius(vj, r, nb);
+              double sw = 0, off = 0;
+              Eigen::Vector3d sp = Eigen::Vector3d::Zero();
+              Eigen::Matrix3d spp = Eigen::Matrix3d::Zero();
+              kernel_sums(nb, P, N, roi_ok, nj, cos_max, r, sw, sp, spp);
+              if (sw <= 0) continue;
+              const Eigen::Vector3d q = kernel_target(vj, nj, sw, sp, spp, u.plane_fit, double(nb.size()), &off);
+              if (off > u.rim_rejection * r) continue;
+              T.row(j) = (vj + std::clamp((q - vj).dot(nj), -r, r) * nj).transpose();
+            }
           }
         }
         for (Eigen::Index j = 0; j < V.rows(); ++j)  // no data this time: the last target stays

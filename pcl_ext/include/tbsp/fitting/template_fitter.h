@@ -136,10 +136,24 @@ struct FitParameters {
   /// constraint (bunny ground truth, 4 rounds, clean Hausdorff averaged over seeds 1-6:
   /// 0.372 % at weight 10 → 0.356 %).
   double detail_marker_weight = 1;
+  /// How the detail rounds set the targets of the data-supported vertices.
+  /// true (default): residual matching — every ROI cloud point p_k within r_max of the fit is
+  /// projected onto it (closest point c_k, which then moves with its face), and a vertex v goes
+  /// to v + Σ w_k (p_k − c_k) / Σ w_k, w_k the quadratic B-spline kernel of |c_k − v| over
+  /// `detail_radius_factor` × r_max (normals within θ_max). The mean residual is zero where the
+  /// fit passes through the data, whatever the curvature, so unlike the §5.3 kernel mean
+  /// (which lies inside a convex surface) it needs no correction terms and can average over a
+  /// wider kernel; it also moves vertices sideways where the data reach beyond the fit (tips).
+  /// false: the §5.3 kernel targets of stage 2, along the vertex normal, plus the face
+  /// constraints of `detail_surface_weight`.
+  bool detail_residual_matching = true;
+  /// Kernel radius of the residual matching as a multiple of r_max (0.5..10).
+  double detail_radius_factor = 2;
   /// Weight of the data → surface constraints of the detail rounds: every face onto which 3 or
   /// more cloud points project (within r_max) pulls its centroid by their mean residual — also
-  /// sideways, where the data reach beyond the mesh. 0: vertex targets only (worse: 0.35 → 0.45 %).
-  double detail_surface_weight = 4;
+  /// sideways, where the data reach beyond the mesh. 0: off (the default: with residual matching
+  /// these few-point means only add noise). With `detail_residual_matching` false use 4.
+  double detail_surface_weight = 0;
   bool laplacian_updating = false;      ///< §5.5.1
   double updating_match_weight = 0.5;   ///< data weight with Laplacian updating
   bool remeshing = false;               ///< §5.5.2 (needs laplacian_updating; changes connectivity)
@@ -204,6 +218,7 @@ struct FitReport {
          t_solve = 0, t_propagation = 0, t_detail = 0, t_remeshing = 0, t_fairing = 0, t_metrics = 0, t_total = 0;
   int detail_iterations_run = 0;         ///< matching / solve steps of the detail rounds, all rounds
   Eigen::Index detail_surface_constraints = 0;  ///< data -> surface constraints, all detail rounds
+  Eigen::Index detail_points_tracked = 0;  ///< cloud points of the residual matching, last detail round
 };
 
 /// \brief Fits `templ` to the cloud P (#P by 3) with normals N (#P by 3, or 0 rows: then they
