@@ -125,9 +125,10 @@ struct FitParameters {
   /// longer held back by the template's detail, while the semantic hole filling stays. Each
   /// round is one factorization + up to `detail_iterations` matching / back-substitution steps
   /// (stopping at `tolerance`). Keeps the template's connectivity. 0: off. Bunny ground truth,
-  /// 30 markers (docs/fitting.md): clean Hausdorff 0.86 → 0.31 % with 4 rounds, hole error
-  /// unchanged; armadillo 43k / 100k points: 4.78 → 3.91 %, +0.8 s per round. Ignored with
-  /// laplacian_updating / remeshing (they already regularize with the current shape).
+  /// 30 markers (docs/fitting.md): clean Hausdorff 0.86 → 0.29 % with 4 rounds (seeds 1-12:
+  /// 0.23-0.52 %), hole error unchanged; armadillo 43k / 100k points: 4.78 → 3.57 %, +1.4-1.9 s
+  /// per round. Cost per iteration: O(#points) closest-point updates + O(#vertices) kernel sums.
+  /// Ignored with laplacian_updating / remeshing (they already regularize with the current shape).
   int detail_rounds = 0;
   int detail_iterations = 8;            ///< per detail round
   double detail_weight = 2;             ///< weight of the §5.3 vertex targets in detail rounds (held vertices: match_weight)
