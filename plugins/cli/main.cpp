@@ -337,6 +337,8 @@ int main(int argc, char** argv) {
                    "rounds of Laplacian updating after the fit, unsupported vertices held (sharper protrusions; 0 = off)");
   fitc->add_option("--detail-radius-factor", fa.p.detail_radius_factor,
                    "kernel radius of the detail rounds' residual matching, x r_max (default 2)");
+  fitc->add_option("--detail-normal-angle", fa.p.detail_normal_angle_deg,
+                   "detail rounds: max angle (degrees) between a point's normal and the face it projects onto (default 40)");
   fitc->add_option("--detail-surface-weight", fa.p.detail_surface_weight,
                    "weight of the detail rounds' per-face data constraints (default 0 = off)");
   fitc->add_flag("--detail-kernel-targets", fa.kernel_detail,

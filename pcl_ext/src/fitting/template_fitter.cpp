@@ -210,6 +210,7 @@ bool FitParameters::isValid(std::string* why) const {
   if (!(detail_weight > 0)) return bad("detail_weight must be > 0");
   if (!(detail_marker_weight > 0)) return bad("detail_marker_weight must be > 0");
   if (!(detail_radius_factor >= 0.5 && detail_radius_factor <= 10)) return bad("detail_radius_factor must be in [0.5, 10]");
+  if (!(detail_normal_angle_deg > 0 && detail_normal_angle_deg <= 180)) return bad("detail_normal_angle_deg must be in (0, 180]");
   if (!(support_points >= 0)) return bad("support_points must be >= 0 (0 = off)");
   if (!(detail_surface_weight >= 0)) return bad("detail_surface_weight must be >= 0 (0 = off)");
   if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
@@ -876,6 +877,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     report_progress(progress, 0.9, "detail rounds");
     const double r = u.max_match_distance;
     const double rd = u.detail_radius_factor * r;  // kernel radius of the residual matching
+    const double cos_detail = std::cos(u.detail_normal_angle_deg * M_PI / 180.0);
     std::vector<std::vector<int>> vf(std::size_t(V.rows()));  // faces around each vertex
     for (Eigen::Index f = 0; f < F.rows(); ++f)
       for (int c = 0; c < 3; ++c) vf[std::size_t(F(f, c))].push_back(int(f));
@@ -922,25 +924,25 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       Eigen::VectorXd dscale = Eigen::VectorXd::Ones(V.rows());
       if (u.detail_residual_matching && u.support_points > 0) {
         const double need = u.support_points * (rd / r) * (rd / r);
-        const Eigen::MatrixX3d VN = vertex_normals(V, F);
         Eigen::MatrixX3d C(Eigen::Index(rk.size()), 3);
         for (Eigen::Index t = 0; t < C.rows(); ++t) {
           const int f = rf[std::size_t(t)];
           C.row(t) = rb(t, 0) * V.row(F(f, 0)) + rb(t, 1) * V.row(F(f, 1)) + rb(t, 2) * V.row(F(f, 2));
         }
         const PointSearch csearch(C);
+        const Eigen::MatrixX3d FN0 = face_normals(V, F);
 #pragma omp parallel
         {
           std::vector<std::pair<Eigen::Index, double>> nb;
 #pragma omp for schedule(dynamic, 256)
           for (Eigen::Index j = 0; j < V.rows(); ++j) {
             if (status[std::size_t(j)] != VertexStatus::Matched) continue;
-            const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
+            const Eigen::Vector3d vj = V.row(j).transpose();
             csearch.radius(vj, rd, nb);
             double sw = 0, sw2 = 0;
             for (const auto& [t, d2] : nb) {
               const Eigen::Index ci = rk[std::size_t(t)];
-              if (N.row(ci).dot(nj) < cos_max || (P.row(ci) - C.row(t)).squaredNorm() > r * r) continue;
+              if (N.row(ci).dot(FN0.row(rf[std::size_t(t)])) < cos_detail || (P.row(ci) - C.row(t)).squaredNorm() > r * r) continue;
               const double w = bspline_weight(std::sqrt(d2) / rd);
               sw += w;
               sw2 += w * w;
@@ -1020,6 +1022,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
             C.row(t) = rb(t, 0) * V.row(F(f, 0)) + rb(t, 1) * V.row(F(f, 1)) + rb(t, 2) * V.row(F(f, 2));
           }
           const PointSearch csearch(C);
+          const Eigen::MatrixX3d FNd = face_normals(V, F);
 #pragma omp parallel
           {
             std::vector<std::pair<Eigen::Index, double>> nb;
@@ -1033,7 +1036,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
               Eigen::Vector3d sr = Eigen::Vector3d::Zero();
               for (const auto& [t, d2] : nb) {
                 const Eigen::Index ci = rk[std::size_t(t)];
-                if (N.row(ci).dot(nj) < cos_max) continue;
+                if (N.row(ci).dot(FNd.row(rf[std::size_t(t)])) < cos_detail) continue;
                 const Eigen::Vector3d res = (P.row(ci) - C.row(t)).transpose();
                 if (res.squaredNorm() > r * r) continue;
                 const double w = bspline_weight(std::sqrt(d2) / rd);
