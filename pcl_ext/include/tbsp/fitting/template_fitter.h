@@ -125,8 +125,8 @@ struct FitParameters {
   /// longer held back by the template's detail, while the semantic hole filling stays. Each
   /// round is one factorization + up to `detail_iterations` matching / back-substitution steps
   /// (stopping at `tolerance`). Keeps the template's connectivity. 0: off. Bunny ground truth,
-  /// 30 markers (docs/fitting.md): clean Hausdorff 0.86 → 0.29 % with 4 rounds (seeds 1-12:
-  /// 0.23-0.52 %), hole error unchanged; armadillo 43k / 100k points: 4.78 → 3.57 %, +1.4-1.9 s
+  /// 30 markers (docs/fitting.md): clean Hausdorff 0.86 → 0.28 % with 4 rounds (seeds 1-24:
+  /// 0.24-0.44 %), hole error unchanged; armadillo 43k / 100k points: 4.78 → 3.46 %, +1.5-1.9 s
   /// per round. Cost per iteration: O(#points) closest-point updates + O(#vertices) kernel sums.
   /// Ignored with laplacian_updating / remeshing (they already regularize with the current shape).
   int detail_rounds = 0;
