@@ -139,39 +139,6 @@ Eigen::Vector3d kernel_target(const Eigen::Vector3d& vj, const Eigen::Vector3d& 
   return q;
 }
 
-/// Closest point to p on triangle abc (Ericson, Real-Time Collision Detection §5.1.5), as
-/// barycentric weights of a, b, c.
-Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                                    const Eigen::Vector3d& c) {
-  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return Eigen::Vector3d(1, 0, 0);
-  const Eigen::Vector3d bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return Eigen::Vector3d(0, 1, 0);
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-    const double v = d1 / (d1 - d3);
-    return Eigen::Vector3d(1 - v, v, 0);
-  }
-  const Eigen::Vector3d cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return Eigen::Vector3d(0, 0, 1);
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-    const double w = d2 / (d2 - d6);
-    return Eigen::Vector3d(1 - w, 0, w);
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    return Eigen::Vector3d(0, 1 - w, w);
-  }
-  const double denom = 1 / (va + vb + vc);
-  const double v = vb * denom, w = vc * denom;
-  return Eigen::Vector3d(1 - v - w, v, w);
-}
-
 /// Kernel sums over the cloud points `nb` (index, squared distance) within radius rr of a vertex
 /// with normal nj: ROI points whose normals deviate at most θ_max (cos_max).
 void kernel_sums(const std::vector<std::pair<Eigen::Index, double>>& nb, const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N,
@@ -913,7 +880,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         rb.resize(Eigen::Index(rk.size()), 3);
         for (std::size_t t = 0; t < rk.size(); ++t) {
           const int f = rf[t];
-          rb.row(Eigen::Index(t)) = closest_on_triangle(P.row(rk[t]).transpose(), V.row(F(f, 0)).transpose(),
+          rb.row(Eigen::Index(t)) = closest_point_barycentric(P.row(rk[t]).transpose(), V.row(F(f, 0)).transpose(),
                                                         V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose()).transpose();
         }
       }
@@ -1007,7 +974,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
               for (int c = 0; c < 3; ++c)
                 for (int f : vf[std::size_t(F(f0, c))]) {
                   const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), e = V.row(F(f, 2)).transpose();
-                  const Eigen::Vector3d w = closest_on_triangle(p, a, b, e);
+                  const Eigen::Vector3d w = closest_point_barycentric(p, a, b, e);
                   const double d2 = (p - (w(0) * a + w(1) * b + w(2) * e)).squaredNorm();
                   if (d2 < best) { best = d2; rf[std::size_t(t)] = f; rb.row(t) = w.transpose(); }
                 }

@@ -126,7 +126,7 @@ struct FitParameters {
   /// round is one factorization + up to `detail_iterations` matching / back-substitution steps
   /// (stopping at `tolerance`). Keeps the template's connectivity. 0: off. Bunny ground truth,
   /// 30 markers (docs/fitting.md): clean Hausdorff 0.86 → 0.28 % with 4 rounds (seeds 1-24:
-  /// 0.24-0.44 %), hole error unchanged; armadillo 43k / 100k points: 4.78 → 3.46 %, +1.5-1.9 s
+  /// 0.25-0.45 %, 16 within 0.3 %), hole error unchanged; armadillo 43k / 100k points: 4.78 → 3.46 %, +1.5-2 s
   /// per round. Cost per iteration: O(#points) closest-point updates + O(#vertices) kernel sums.
   /// Ignored with laplacian_updating / remeshing (they already regularize with the current shape).
   int detail_rounds = 0;
@@ -153,8 +153,8 @@ struct FitParameters {
   /// Residual matching: a point counts only if its normal is within this angle of the normal of
   /// the fit's face it projects onto (stage 2's θ_max compares with the vertex normal instead,
   /// which at a crease or groove is an average of both sides). Bunny ground truth, seeds 1-24,
-  /// 4 rounds: 40° against the vertex normal at 60°: mean clean Hausdorff 0.316 → 0.299 %,
-  /// worst 0.522 → 0.451 % (chosen on seeds 1-12, checked on 13-24; docs/fitting.md).
+  /// 4 rounds: 40° against the vertex normal at 60°: mean clean Hausdorff 0.316 → 0.298 %,
+  /// worst 0.522 → 0.445 % (chosen on seeds 1-12, checked on 13-24; docs/fitting.md).
   double detail_normal_angle_deg = 40;
   /// Weight of the data → surface constraints of the detail rounds: every face onto which 3 or
   /// more cloud points project (within r_max) pulls its centroid by their mean residual — also

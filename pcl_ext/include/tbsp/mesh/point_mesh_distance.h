@@ -7,6 +7,14 @@
 
 namespace tbsp {
 
+/// \brief Closest point to p on the triangle abc, as barycentric weights (wa, wb, wc) ≥ 0 that sum
+/// to 1 (Ericson, Real-Time Collision Detection §5.1.5: Voronoi regions of vertices, edges and
+/// face). O(1). A degenerate triangle (collinear or coincident corners) gives the closest point
+/// of its longest edge. Written by hand for the fitter's per-iteration closest-point updates of
+/// every cloud point among a few faces, where building CGAL's AABB tree again would dominate.
+Eigen::Vector3d closest_point_barycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                          const Eigen::Vector3d& c);
+
 /// \brief AABB tree over a triangle mesh; closest-point queries are exact and thread-safe.
 class MeshDistance {
 public:
