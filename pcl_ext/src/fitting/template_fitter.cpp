@@ -884,6 +884,38 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
                                                         V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose()).transpose();
         }
       }
+      // the tracked points' closest points on the current fit
+      auto tracked_closest = [&]() {
+        Eigen::MatrixX3d C(Eigen::Index(rk.size()), 3);
+        for (Eigen::Index t = 0; t < C.rows(); ++t) {
+          const int f = rf[std::size_t(t)];
+          C.row(t) = rb(t, 0) * V.row(F(f, 0)) + rb(t, 1) * V.row(F(f, 1)) + rb(t, 2) * V.row(F(f, 2));
+        }
+        return C;
+      };
+      // kernel sums of the residual matching at v: Σw, Σw², Σw (p_k − c_k) over the tracked points
+      // whose closest point c_k lies within r_d of v, whose normal is within
+      // detail_normal_angle_deg of their face's and whose residual is at most r
+      struct ResidualSums {
+        double sw = 0, sw2 = 0;
+        Eigen::Vector3d sr = Eigen::Vector3d::Zero();
+      };
+      auto residual_sums = [&](const PointSearch& cs, const Eigen::MatrixX3d& C, const Eigen::MatrixX3d& FNc,
+                               const Eigen::Vector3d& v, std::vector<std::pair<Eigen::Index, double>>& nb) {
+        ResidualSums a;
+        cs.radius(v, rd, nb);
+        for (const auto& [t, d2] : nb) {
+          const Eigen::Index ci = rk[std::size_t(t)];
+          if (N.row(ci).dot(FNc.row(rf[std::size_t(t)])) < cos_detail) continue;
+          const Eigen::Vector3d res = (P.row(ci) - C.row(t)).transpose();
+          if (res.squaredNorm() > r * r) continue;
+          const double w = bspline_weight(std::sqrt(d2) / rd);
+          a.sw += w;
+          a.sw2 += w * w;
+          a.sr += w * res;
+        }
+        return a;
+      };
       // sparse support, as in stage 2: a vertex whose residual kernel holds fewer than
       // support_points × (r_d / r)² effective points (the count stage 2's kernel would see in the
       // same patch) gets least-squares weight ∝ n_eff — at the rim of holes one or two noisy
@@ -891,11 +923,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       Eigen::VectorXd dscale = Eigen::VectorXd::Ones(V.rows());
       if (u.detail_residual_matching && u.support_points > 0) {
         const double need = u.support_points * (rd / r) * (rd / r);
-        Eigen::MatrixX3d C(Eigen::Index(rk.size()), 3);
-        for (Eigen::Index t = 0; t < C.rows(); ++t) {
-          const int f = rf[std::size_t(t)];
-          C.row(t) = rb(t, 0) * V.row(F(f, 0)) + rb(t, 1) * V.row(F(f, 1)) + rb(t, 2) * V.row(F(f, 2));
-        }
+        const Eigen::MatrixX3d C = tracked_closest();
         const PointSearch csearch(C);
         const Eigen::MatrixX3d FN0 = face_normals(V, F);
 #pragma omp parallel
@@ -904,17 +932,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
 #pragma omp for schedule(dynamic, 256)
           for (Eigen::Index j = 0; j < V.rows(); ++j) {
             if (status[std::size_t(j)] != VertexStatus::Matched) continue;
-            const Eigen::Vector3d vj = V.row(j).transpose();
-            csearch.radius(vj, rd, nb);
-            double sw = 0, sw2 = 0;
-            for (const auto& [t, d2] : nb) {
-              const Eigen::Index ci = rk[std::size_t(t)];
-              if (N.row(ci).dot(FN0.row(rf[std::size_t(t)])) < cos_detail || (P.row(ci) - C.row(t)).squaredNorm() > r * r) continue;
-              const double w = bspline_weight(std::sqrt(d2) / rd);
-              sw += w;
-              sw2 += w * w;
-            }
-            dscale(j) = sw2 > 0 ? std::min(1.0, sw * sw / sw2 / need) : 1.0;
+            const ResidualSums a = residual_sums(csearch, C, FN0, V.row(j).transpose(), nb);
+            dscale(j) = a.sw2 > 0 ? std::min(1.0, a.sw * a.sw / a.sw2 / need) : 1.0;
           }
         }
       }
@@ -926,9 +945,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         if (data) ids[std::size_t(j)] = id;
       }
       // data -> surface: each face onto which 3 or more cloud points (ROI, within r) project
-      // pulls its centroid by their mean residual. The vertex targets above move along the
-      // normals only; these also pull sideways where the data reach beyond the mesh (the tip
-      // of a protrusion projects onto the faces around the fit's tip vertex).
+      // pulls its centroid by their mean residual. The §5.3 kernel targets (residual matching
+      // off) move along the normals only; these also pull sideways where the data reach beyond
+      // the mesh (the tip of a protrusion projects onto the faces around the fit's tip vertex).
       if (u.detail_surface_weight > 0) {
         const MeshDistance md(V, F);
         Eigen::MatrixX3d CP(np, 3);
@@ -980,14 +999,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
                 }
             }
           }
-          // target = vertex + kernel-weighted mean of the residuals p_k - c_k of the points whose
-          // closest point c_k on the fit lies within r_d of the vertex (normals within θ_max)
-          const Eigen::Index nt = Eigen::Index(rk.size());
-          Eigen::MatrixX3d C(nt, 3);
-          for (Eigen::Index t = 0; t < nt; ++t) {
-            const int f = rf[std::size_t(t)];
-            C.row(t) = rb(t, 0) * V.row(F(f, 0)) + rb(t, 1) * V.row(F(f, 1)) + rb(t, 2) * V.row(F(f, 2));
-          }
+          // target = vertex + kernel-weighted mean of the residuals p_k - c_k
+          const Eigen::MatrixX3d C = tracked_closest();
           const PointSearch csearch(C);
           const Eigen::MatrixX3d FNd = face_normals(V, F);
 #pragma omp parallel
@@ -996,22 +1009,10 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
 #pragma omp for schedule(dynamic, 256)
             for (Eigen::Index j = 0; j < V.rows(); ++j) {
               if (ids[std::size_t(j)] < 0) continue;
-              const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
-              if (nj.squaredNorm() == 0) continue;
-              csearch.radius(vj, rd, nb);
-              double sw = 0;
-              Eigen::Vector3d sr = Eigen::Vector3d::Zero();
-              for (const auto& [t, d2] : nb) {
-                const Eigen::Index ci = rk[std::size_t(t)];
-                if (N.row(ci).dot(FNd.row(rf[std::size_t(t)])) < cos_detail) continue;
-                const Eigen::Vector3d res = (P.row(ci) - C.row(t)).transpose();
-                if (res.squaredNorm() > r * r) continue;
-                const double w = bspline_weight(std::sqrt(d2) / rd);
-                sw += w;
-                sr += w * res;
-              }
-              if (sw <= 0) continue;
-              Eigen::Vector3d m = sr / sw;
+              const Eigen::Vector3d vj = V.row(j).transpose();
+              const ResidualSums a = residual_sums(csearch, C, FNd, vj, nb);
+              if (a.sw <= 0) continue;
+              Eigen::Vector3d m = a.sr / a.sw;
               if (m.norm() > r) m *= r / m.norm();
               T.row(j) = (vj + m).transpose();
             }
