@@ -147,7 +147,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
                      {"detail_weight", u.detail_weight}, {"detail_surface_weight", u.detail_surface_weight},
                      {"detail_residual_matching", u.detail_residual_matching}, {"detail_radius_factor", u.detail_radius_factor},
-                     {"detail_normal_angle_deg", u.detail_normal_angle_deg},
+                     {"detail_normal_angle_deg", u.detail_normal_angle_deg}, {"detail_tolerance", u.detail_tolerance},
                      {"detail_marker_weight", u.detail_marker_weight}, {"consistent_normals", u.consistent_normals}};
   j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
                  {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},

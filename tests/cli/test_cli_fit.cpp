@@ -86,6 +86,7 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_TRUE(j2["parameters"]["detail_residual_matching"].get<bool>());
   EXPECT_DOUBLE_EQ(j2["parameters"]["detail_radius_factor"].get<double>(), 2.0);
   EXPECT_DOUBLE_EQ(j2["parameters"]["detail_normal_angle_deg"].get<double>(), 40.0);
+  EXPECT_DOUBLE_EQ(j2["parameters"]["detail_tolerance"].get<double>(), 0.5 * j2["parameters"]["tolerance"].get<double>());
   EXPECT_GT(j2["counts"]["detail_points_tracked"].get<long>(), 0);
   EXPECT_EQ(j2["counts"]["detail_surface_constraints"].get<long>(), 0);  // off by default
   EXPECT_GT(j2["timings_s"]["detail"].get<double>(), 0.0);

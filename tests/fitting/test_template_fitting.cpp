@@ -176,7 +176,7 @@ TEST(TemplateFittingBadInput, ClearErrors) {
                    +[](FitParameters& q) { q.detail_rounds = -1; }, +[](FitParameters& q) { q.detail_iterations = 0; },
                    +[](FitParameters& q) { q.detail_weight = 0; }, +[](FitParameters& q) { q.detail_marker_weight = 0; },
                    +[](FitParameters& q) { q.detail_radius_factor = 0.1; }, +[](FitParameters& q) { q.detail_radius_factor = NAN; },
-                   +[](FitParameters& q) { q.detail_normal_angle_deg = 0; },
+                   +[](FitParameters& q) { q.detail_normal_angle_deg = 0; }, +[](FitParameters& q) { q.detail_tolerance = -1; },
                    +[](FitParameters& q) { q.support_points = -1; }}) {
     FitParameters q;
     bad(q);

@@ -178,6 +178,7 @@ bool FitParameters::isValid(std::string* why) const {
   if (!(detail_marker_weight > 0)) return bad("detail_marker_weight must be > 0");
   if (!(detail_radius_factor >= 0.5 && detail_radius_factor <= 10)) return bad("detail_radius_factor must be in [0.5, 10]");
   if (!(detail_normal_angle_deg > 0 && detail_normal_angle_deg <= 180)) return bad("detail_normal_angle_deg must be in (0, 180]");
+  if (!(detail_tolerance >= 0)) return bad("detail_tolerance must be >= 0 (0 = tolerance / 2)");
   if (!(support_points >= 0)) return bad("support_points must be >= 0 (0 = off)");
   if (!(detail_surface_weight >= 0)) return bad("detail_surface_weight must be >= 0 (0 = off)");
   if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
@@ -259,6 +260,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   if (u.max_match_distance == 0) u.max_match_distance = std::max(3 * rep.point_spacing, 0.005 * diag);
   if (u.initial_match_distance == 0) u.initial_match_distance = std::max(u.max_match_distance, 0.03 * diag);
   if (u.tolerance == 0) u.tolerance = 2e-4 * diag;
+  if (u.detail_tolerance == 0) u.detail_tolerance = 0.5 * u.tolerance;
   if (u.subdivision_error == 0) u.subdivision_error = 0.0015 * diag;
   if (u.remeshing && !u.laplacian_updating) {
     u.laplacian_updating = true;
@@ -1055,7 +1057,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         logger()->debug("[TemplateFitting] detail round {} iteration {}: 99th percentile move {:.3g}", round + 1, k + 1, move);
         logger()->trace("[TemplateFitting] detail solve: factorize {:.3f}, back-substitution {:.3f}", Dd.report().t_factorize,
                         Dd.report().t_solve);
-        if (move < u.tolerance) { ++k; break; }
+        if (move < u.detail_tolerance) { ++k; break; }
       }
       rep.detail_iterations_run += k;
     }
