@@ -80,7 +80,7 @@ int cmd_deform(const DeformArgs& a) {
 struct FitArgs {
   std::string templ, cloud, markers, out, status, report, roi, png;
   tbsp::FitParameters p;
-  bool no_prop = false, no_scale = false, no_field = false, quiet = false, kernel_detail = false;
+  bool no_prop = false, no_scale = false, no_field = false, quiet = false, kernel_detail = false, no_pleats = false;
 };
 
 int cmd_fit(FitArgs a) {
@@ -95,6 +95,7 @@ int cmd_fit(FitArgs a) {
   a.p.estimate_scale = !a.no_scale;
   a.p.rotation_field = !a.no_field;
   a.p.detail_residual_matching = !a.kernel_detail;
+  a.p.pleat_collapse = !a.no_pleats;
   tbsp::cli::ProgressBar bar(!a.quiet);
   tbsp::TriMesh out;
   tbsp::FitReport rep;
@@ -346,6 +347,8 @@ int main(int argc, char** argv) {
   fitc->add_flag("--laplacian-updating", fa.p.laplacian_updating, "§5.5.1: rebuild the Laplacian each iteration");
   fitc->add_flag("--remesh", fa.p.remeshing, "§5.5.2: adaptive subdivision (changes connectivity)");
   fitc->add_flag("--fairing", fa.p.fairing, "§5.5.3: tangential fairing against fold-overs");
+  fitc->add_flag("--no-pleat-collapse", fa.no_pleats,
+                 "with --remesh --fairing: keep pleats (faces against the data normals) instead of collapsing them");
   fitc->add_flag("--refine-rotations", fa.p.refine_rotations, "re-estimate the rotation field from the fit");
   fitc->add_flag("--consistent-normals", fa.p.consistent_normals,
                  "make estimated normals consistent between neighbours after orienting them by the template");

@@ -141,7 +141,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"plane_fit", u.plane_fit}, {"binned_matching", u.binned_matching}, {"rotation_field", u.rotation_field}, {"estimate_scale", u.estimate_scale},
                      {"propagate_displacements", u.propagate_displacements}, {"refine_rotations", u.refine_rotations},
                      {"laplacian_updating", u.laplacian_updating}, {"remeshing", u.remeshing},
-                     {"subdivision_error", u.subdivision_error}, {"fairing", u.fairing},
+                     {"subdivision_error", u.subdivision_error}, {"fairing", u.fairing}, {"pleat_collapse", u.pleat_collapse},
                      {"radius_steps", u.radius_steps}, {"freeze_constraints", u.freeze_constraints},
                      {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation},
                      {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
@@ -160,7 +160,9 @@ nlohmann::json fit_report_json(const FitReport& r) {
                   {"hausdorff", r.hausdorff}, {"hausdorff_relative", r.hausdorff_rel}, {"rms", r.rms},
                   {"mean", r.mean}, {"p99", r.p99}, {"coverage_vertices", r.coverage_vertices},
                   {"coverage_points", r.coverage_points}, {"flipped_faces", r.flipped_faces}, {"folded_edges", r.folded_edges},
-                  {"local_folds", r.local_folds}, {"untangled_vertices", r.untangled_vertices}};
+                  {"local_folds", r.local_folds}, {"untangled_vertices", r.untangled_vertices},
+                  {"pleat_faces_before", r.pleat_faces_before}, {"pleat_faces_after", r.pleat_faces_after},
+                  {"pleat_collapses", r.pleat_collapses}};
   j["timings_s"] = {{"normals", r.t_normals},     {"search_structure", r.t_search}, {"initial_deformation", r.t_initial},
                     {"global_scale", r.t_scale},  {"iterations", r.t_iterations},   {"matching", r.t_matching},
                     {"solve", r.t_solve},         {"propagation", r.t_propagation}, {"detail", r.t_detail},

@@ -69,6 +69,9 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_EQ(lines, s.templ.V.rows());
   EXPECT_GT(std::filesystem::file_size(png), 1000u);
   EXPECT_EQ(j["metrics"]["local_folds"].get<int>(), -1);  // computed with --fairing only
+  EXPECT_TRUE(j["parameters"]["pleat_collapse"].get<bool>());  // on, but it needs --remesh --fairing:
+  EXPECT_EQ(j["metrics"]["pleat_collapses"].get<int>(), 0);     // the template's connectivity is kept
+  EXPECT_EQ(j["metrics"]["pleat_faces_before"].get<int>(), 0);
   // detail rounds: same connectivity, the report says what they did, the fit is not worse
   const std::string out2 = (dir / "fit_detail.ply").string(), rep2 = (dir / "r2.json").string();
   ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
@@ -99,13 +102,15 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   // the previous detail matching (§5.3 kernel targets + per-face constraints) stays selectable
   const std::string rep3 = (dir / "r3.json").string();
   ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
-                    " --out " + out2 + " --report " + rep3 + " --detail-rounds 1 --detail-kernel-targets --detail-surface-weight 4",
+                    " --out " + out2 + " --report " + rep3 +
+                    " --detail-rounds 1 --detail-kernel-targets --detail-surface-weight 4 --no-pleat-collapse",
                 dir, &err),
             0)
       << err;
   nlohmann::json j3;
   std::ifstream(rep3) >> j3;
   EXPECT_FALSE(j3["parameters"]["detail_residual_matching"].get<bool>());
+  EXPECT_FALSE(j3["parameters"]["pleat_collapse"].get<bool>());
   EXPECT_EQ(j3["counts"]["detail_points_tracked"].get<long>(), 0);
   EXPECT_GT(j3["counts"]["detail_surface_constraints"].get<long>(), 0);
   EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +

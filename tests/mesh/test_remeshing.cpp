@@ -2,7 +2,9 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "tbsp/mesh/primitives.h"
 #include "tbsp/mesh/remeshing.h"
@@ -124,4 +126,93 @@ TEST(AdaptiveSubdivision, OneMarkedFaceGetsRedAndItsNeighboursGreen) {
   Eigen::MatrixX3d up(s.F.rows(), 3);
   up.rowwise() = Eigen::RowVector3d(0, 0, 1);
   EXPECT_EQ(count_flipped_faces(s.V, s.F, up), 0);
+}
+
+namespace {
+// interior edges shared by exactly two faces, boundary edges by one, none by more (manifold)
+bool edges_manifold(const Eigen::MatrixX3i& F) {
+  std::map<std::pair<int, int>, int> count;
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = F(f, k), b = F(f, (k + 1) % 3);
+      ++count[{std::min(a, b), std::max(a, b)}];
+    }
+  for (const auto& e : count)
+    if (e.second > 2) return false;
+  return true;
+}
+}  // namespace
+
+// A column of a planar grid pushed 1.5 spacings along +x lies beyond the next column: the strip
+// between them is a pleat (faces inverted, vertices out of order along the plane). Collapsing
+// the pleat's short edges merges the out-of-order pairs; the result lies in the plane, points
+// along the reference normal everywhere and covers the unit square exactly once (its unsigned
+// area is the square's: no overlap left).
+TEST(PleatCollapse, RemovesAPleatInAPlane) {
+  TriMesh m = make_grid(16, 16);
+  const Eigen::Vector3d up = face_normals(m.V, m.F).row(0).transpose();
+  ASSERT_NEAR(std::abs(up.z()), 1.0, 1e-12);
+  std::vector<Eigen::Index> column;
+  for (double y = 0.25; y <= 0.75 + 1e-9; y += 1.0 / 16) column.push_back(nearest_vertex(m, 0.5, y));
+  for (Eigen::Index v : column) m.V(v, 0) += 1.5 / 16;
+  const Eigen::MatrixX3d ref_normals = face_normals(make_grid(16, 16).V, m.F);  // the plane's
+  const int inverted = count_flipped_faces(m.V, m.F, ref_normals);
+  ASSERT_GE(inverted, 2 * int(column.size()) - 2);
+  const Eigen::Index nv = m.V.rows();
+  const Eigen::MatrixX3d V0 = m.V;
+  std::vector<int> old_to_new;
+  const PleatCollapseResult r = collapse_pleats(m.V, m.F, [&](const Eigen::Vector3d&) { return up; }, &old_to_new);
+  EXPECT_EQ(r.faces_before, inverted);
+  EXPECT_EQ(r.faces_after, 0);
+  EXPECT_GE(r.collapses, int(column.size()) - 2);
+  EXPECT_LE(r.collapses, 2 * int(column.size()));  // about one per out-of-order pair
+  const Eigen::MatrixX3d FN = face_normals(m.V, m.F);
+  for (Eigen::Index f = 0; f < m.F.rows(); ++f) EXPECT_GT(FN.row(f).dot(up), 0.99) << "face " << f;
+  EXPECT_LT(m.V.col(2).cwiseAbs().maxCoeff(), 1e-12);  // still in the plane
+  EXPECT_NEAR(total_area(m), 1.0, 1e-9);                // covers the square once
+  EXPECT_TRUE(edges_manifold(m.F));
+  // the map: one entry per old vertex, removed ones -1, the others keep their place
+  ASSERT_EQ(old_to_new.size(), std::size_t(nv));
+  int removed = 0;
+  for (Eigen::Index i = 0; i < nv; ++i) {
+    const int j = old_to_new[std::size_t(i)];
+    if (j < 0) {
+      ++removed;
+      continue;
+    }
+    ASSERT_LT(j, m.V.rows());
+    if (std::find(column.begin(), column.end(), i) == column.end()) {  // merged partners move within the pleat
+      EXPECT_LT((m.V.row(j) - V0.row(i)).norm(), 1.5 / 16 + 1e-12);
+    }
+  }
+  EXPECT_EQ(removed, r.collapses);
+  EXPECT_EQ(m.V.rows(), nv - r.collapses);
+  // Euler characteristic of the disc is kept: one collapse removes 1 vertex, 3 edges, 2 faces
+  EXPECT_EQ(m.V.rows() - unique_edges(m.F).rows() + m.F.rows(), 1);
+}
+
+// Nothing to do on a good surface or where there is no reference (no data near the face).
+TEST(PleatCollapse, LeavesGoodSurfacesAndFacesWithoutDataAlone) {
+  TriMesh m = make_icosphere(3);
+  const TriMesh m0 = m;
+  std::vector<int> map;
+  PleatCollapseResult r = collapse_pleats(m.V, m.F, [](const Eigen::Vector3d& c) { return Eigen::Vector3d(c.normalized()); }, &map);
+  EXPECT_EQ(r.faces_before, 0);
+  EXPECT_EQ(r.collapses, 0);
+  EXPECT_EQ(m.V, m0.V);
+  EXPECT_EQ(m.F, m0.F);
+  ASSERT_EQ(map.size(), std::size_t(m0.V.rows()));
+  for (std::size_t i = 0; i < map.size(); ++i) EXPECT_EQ(map[i], int(i));
+  // no reference (no data near any face): nothing counts
+  r = collapse_pleats(m.V, m.F, [](const Eigen::Vector3d&) { return Eigen::Vector3d::Zero(); });
+  EXPECT_EQ(r.faces_before, 0);
+  EXPECT_EQ(r.collapses, 0);
+  EXPECT_EQ(m.V, m0.V);
+  // a reference pointing inwards puts every face against it: that is an orientation problem,
+  // not pleats, and the mesh is not decimated
+  r = collapse_pleats(m.V, m.F, [](const Eigen::Vector3d& c) { return Eigen::Vector3d(-c.normalized()); });
+  EXPECT_EQ(r.faces_before, m0.F.rows());
+  EXPECT_EQ(r.faces_after, m0.F.rows());
+  EXPECT_EQ(r.collapses, 0);
+  EXPECT_EQ(m.F, m0.F);
 }

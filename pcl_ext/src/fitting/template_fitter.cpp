@@ -1083,6 +1083,20 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     }
     return flipped;
   };
+  // cloud normals for the fold-over checks: estimated normals are made consistent first (unless
+  // the fit already did): a patch the template oriented inwards (a sphere over a concave ledge)
+  // is not a patch of flipped faces. Computed once, on first use.
+  Eigen::MatrixX3d NC;
+  bool nc_ready = false;
+  auto consistent_N = [&]() -> const Eigen::MatrixX3d& {
+    if (!rep.normals_estimated || u.consistent_normals) return N;
+    if (!nc_ready) {
+      NC = N;
+      orient_normals_consistently(search, NC, Eigen::VectorXd::Ones(np), u.normal_neighbours);
+      nc_ready = true;
+    }
+    return NC;
+  };
   auto folded_edges = [&](const Eigen::MatrixX3d& X, std::vector<char>* mark) {
     const Eigen::MatrixX3d FN = face_normals(X, F);
     std::unordered_map<std::uint64_t, Eigen::Index> first;
@@ -1103,43 +1117,95 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
     return folds;
   };
-  if (u.fairing) {
+  // ---- pleat collapse (with remeshing and fairing, after the fold repair): faces against the
+  // cloud's (consistent) normal near them are strips whose vertices lie out of order along the
+  // surface; the out-of-order vertices are merged by edge collapses (collapse_pleats), the
+  // crumples the merges leave are untangled (at most 3 passes), and the fold repair then runs
+  // again on any edge the untangling bent back.
+  const double r2_pleat = u.max_match_distance * u.max_match_distance;
+  auto pleat_reference = [&](const Eigen::Vector3d& c) -> Eigen::Vector3d {
+    double d2 = 0;
+    const Eigen::Index k = search.nearest(c, &d2);
+    if (k < 0 || !roi_ok[std::size_t(k)] || d2 >= r2_pleat) return Eigen::Vector3d::Zero();
+    return consistent_N().row(k).transpose();
+  };
+  auto pleat_step = [&]() {
     t0 = Clock::now();
-    const auto adj = vertex_adjacency(F, V.rows());
-    std::vector<char> mark;
+    consistent_N();  // computed once, before the parallel use
     for (int pass = 0; pass < 3; ++pass) {
-      for (int round = 0; round < 30; ++round) {
-        mark.assign(std::size_t(V.rows()), 0);
-        const int bad = folded_edges(V, &mark);  // geometric: independent of estimated normals
-        if (bad == 0) break;
-        std::vector<char> region = mark;
-        for (int ring = 0; ring < 1 + round / 5; ++ring) {  // the region grows while folds persist
-          const std::vector<char> prev = region;
-          for (Eigen::Index i = 0; i < V.rows(); ++i)
-            if (prev[std::size_t(i)])
-              for (int j : adj[std::size_t(i)]) region[std::size_t(j)] = 1;
-        }
-        for (int step = 0; step < 5; ++step) {
-          Eigen::MatrixX3d Vs = V;
-          for (Eigen::Index i = 0; i < V.rows(); ++i) {
-            if (!region[std::size_t(i)] || adj[std::size_t(i)].empty()) continue;
-            Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
-            for (int j : adj[std::size_t(i)]) c += V.row(j);
-            Vs.row(i) = 0.5 * V.row(i) + 0.5 * c / double(adj[std::size_t(i)].size());
-          }
-          V = Vs;
-        }
-      }
-      // small crumples that bend no single edge back (local_folds): their vertices are re-placed
-      // by the membrane of their one-ring, grown by one ring only where that is not enough (a
-      // wider membrane flattens real detail: 2 rings raised the Igea fit's Hausdorff 0.44 -> 0.63 %)
+      std::vector<int> old_to_new;
+      const PleatCollapseResult pr = collapse_pleats(V, F, pleat_reference, &old_to_new);
+      if (pass == 0) rep.pleat_faces_before = pr.faces_before;
+      if (pr.collapses == 0) break;
+      rep.pleat_collapses += pr.collapses;
+      std::vector<VertexStatus> st(std::size_t(V.rows()), VertexStatus::Unmatched);
+      for (std::size_t i = 0; i < old_to_new.size() && i < status.size(); ++i)
+        if (old_to_new[i] >= 0) st[std::size_t(old_to_new[i])] = status[i];
+      status = std::move(st);
       const UntangleResult ur = untangle_local_folds(V, F, 0, 20, 1);
       rep.untangled_vertices += ur.vertices_moved;
-      if (ur.vertices_moved == 0 || folded_edges(V, nullptr) == 0) break;  // else: repair the edges it bent
     }
     rep.t_fairing += since(t0);
-  }
+  };
 
+  auto fold_repair = [&]() {
+    if (u.fairing) {
+      t0 = Clock::now();
+      const auto adj = vertex_adjacency(F, V.rows());
+      std::vector<char> mark;
+      for (int pass = 0; pass < 3; ++pass) {
+        for (int round = 0; round < 30; ++round) {
+          mark.assign(std::size_t(V.rows()), 0);
+          const int bad = folded_edges(V, &mark);  // geometric: independent of estimated normals
+          if (bad == 0) break;
+          std::vector<char> region = mark;
+          for (int ring = 0; ring < 1 + round / 5; ++ring) {  // the region grows while folds persist
+            const std::vector<char> prev = region;
+            for (Eigen::Index i = 0; i < V.rows(); ++i)
+              if (prev[std::size_t(i)])
+                for (int j : adj[std::size_t(i)]) region[std::size_t(j)] = 1;
+          }
+          for (int step = 0; step < 5; ++step) {
+            Eigen::MatrixX3d Vs = V;
+            for (Eigen::Index i = 0; i < V.rows(); ++i) {
+              if (!region[std::size_t(i)] || adj[std::size_t(i)].empty()) continue;
+              Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+              for (int j : adj[std::size_t(i)]) c += V.row(j);
+              Vs.row(i) = 0.5 * V.row(i) + 0.5 * c / double(adj[std::size_t(i)].size());
+            }
+            V = Vs;
+          }
+        }
+        // small crumples that bend no single edge back (local_folds): their vertices are re-placed
+        // by the membrane of their one-ring, grown by one ring only where that is not enough (a
+        // wider membrane flattens real detail: 2 rings raised the Igea fit's Hausdorff 0.44 -> 0.63 %)
+        const UntangleResult ur = untangle_local_folds(V, F, 0, 20, 1);
+        rep.untangled_vertices += ur.vertices_moved;
+        if (ur.vertices_moved == 0 || folded_edges(V, nullptr) == 0) break;  // else: repair the edges it bent
+      }
+      rep.t_fairing += since(t0);
+    }
+  };
+  fold_repair();
+
+  if (u.remeshing && u.fairing && u.pleat_collapse) {
+    pleat_step();
+    if (rep.pleat_collapses > 0) {
+      fold_repair();  // edges the untangling bent back
+      const Eigen::MatrixX3d FN = face_normals(V, F);
+      int against = 0;
+#pragma omp parallel for schedule(dynamic, 1024) reduction(+ : against)
+      for (Eigen::Index f = 0; f < F.rows(); ++f) {
+        const Eigen::Vector3d cf = (V.row(F(f, 0)) + V.row(F(f, 1)) + V.row(F(f, 2))).transpose() / 3.0;
+        against += FN.row(f).dot(pleat_reference(cf)) < 0;
+      }
+      rep.pleat_faces_after = against;
+    } else {
+      rep.pleat_faces_after = rep.pleat_faces_before;
+    }
+    logger()->debug("[TemplateFitting] pleat collapse: {} faces against the cloud normals -> {}, {} edges collapsed",
+                    rep.pleat_faces_before, rep.pleat_faces_after, rep.pleat_collapses);
+  }
   // ---- metrics (cloud ROI -> result)
   report_progress(progress, 0.95, "metrics");
   t0 = Clock::now();
@@ -1162,13 +1228,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     // fold-overs: face normal against the cloud normals near the face centre. Estimated normals
     // are first made consistent for this count (unless the fit already did): a patch the
     // template oriented inwards (a sphere over a concave ledge) is not a patch of flipped faces.
-    if (rep.normals_estimated && !u.consistent_normals) {
-      Eigen::MatrixX3d NC = N;
-      orient_normals_consistently(search, NC, Eigen::VectorXd::Ones(np), u.normal_neighbours);
-      rep.flipped_faces = flipped_faces(V, NC);
-    } else {
-      rep.flipped_faces = flipped_faces(V, N);
-    }
+    rep.flipped_faces = flipped_faces(V, consistent_N());
     rep.folded_edges = folded_edges(V, nullptr);
     rep.local_folds = u.fairing ? count_local_folds(V, F) : -1;  // 0.11 s on 86k faces: with the fold repair only
     if (u.fairing && rep.local_folds > 0)

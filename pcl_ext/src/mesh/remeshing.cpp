@@ -3,6 +3,8 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <iterator>
+#include <limits>
 #include <map>
 #include <unordered_map>
 
@@ -324,6 +326,221 @@ UntangleResult untangle_local_folds(Eigen::MatrixX3d& V, const Eigen::MatrixX3i&
     if (res.folds_after >= before) cur_rings = std::min(cur_rings + 1, std::max(0, max_rings));
   }
   res.vertices_moved = int(std::count(moved.begin(), moved.end(), 1));
+  return res;
+}
+
+}  // namespace tbsp
+
+namespace tbsp {
+
+PleatCollapseResult collapse_pleats(Eigen::MatrixX3d& V, Eigen::MatrixX3i& F,
+                                    const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& reference_normal,
+                                    std::vector<int>* old_to_new, int max_passes, double min_cosine) {
+  PleatCollapseResult res;
+  const Eigen::Index nv0 = V.rows();
+  std::vector<int> map(static_cast<std::size_t>(nv0));
+  for (Eigen::Index i = 0; i < nv0; ++i) map[std::size_t(i)] = int(i);
+  auto finish = [&]() {
+    if (old_to_new) *old_to_new = map;
+  };
+  if (F.rows() == 0) {
+    finish();
+    return res;
+  }
+  // unit normal (zero when degenerate), centroid and doubled area of a triangle
+  auto tri = [&](int a, int b, int c, Eigen::Vector3d& centroid, double& area2) {
+    const Eigen::Vector3d A = V.row(a), B = V.row(b), C = V.row(c);
+    centroid = (A + B + C) / 3.0;
+    const Eigen::Vector3d n = (B - A).cross(C - A);
+    area2 = n.norm();
+    return area2 > 0 ? Eigen::Vector3d(n / area2) : Eigen::Vector3d::Zero();
+  };
+  auto against = [&](int a, int b, int c) {
+    Eigen::Vector3d cen;
+    double ar;
+    const Eigen::Vector3d n = tri(a, b, c, cen, ar);
+    const Eigen::Vector3d r = reference_normal(cen);
+    return r.squaredNorm() > 0 && n.dot(r) < min_cosine;
+  };
+  double min_area2 = 0;
+  {
+    std::vector<double> len;
+    len.reserve(std::size_t(F.rows()));
+    for (Eigen::Index f = 0; f < F.rows(); ++f) len.push_back((V.row(F(f, 0)) - V.row(F(f, 1))).norm());
+    std::nth_element(len.begin(), len.begin() + long(len.size() / 2), len.end());
+    const double med = len[len.size() / 2];
+    min_area2 = 2e-3 * med * med;  // doubled area
+  }
+  for (int pass = 0; pass < max_passes; ++pass) {
+    const Eigen::Index nv = V.rows(), nf = F.rows();
+    std::vector<char> bad(std::size_t(nf), 0);
+#pragma omp parallel for schedule(dynamic, 1024)
+    for (Eigen::Index f = 0; f < nf; ++f) bad[std::size_t(f)] = against(F(f, 0), F(f, 1), F(f, 2));
+    int nbad = 0;
+    for (char b : bad) nbad += b;
+    if (pass == 0) res.faces_before = nbad;
+    res.faces_after = nbad;
+    if (nbad == 0) break;
+    // pleats are rare; a large share of faces against the reference is a reference oriented the
+    // other way (or a template inside out), which collapsing would only decimate
+    if (pass == 0 && double(nbad) > 0.05 * double(nf)) break;
+    ++res.passes;
+    std::vector<std::vector<int>> vf(static_cast<std::size_t>(nv));
+    for (Eigen::Index f = 0; f < nf; ++f)
+      for (int k = 0; k < 3; ++k) vf[std::size_t(F(f, k))].push_back(int(f));
+    std::vector<std::pair<double, std::pair<int, int>>> cand;
+    for (Eigen::Index f = 0; f < nf; ++f)
+      if (bad[std::size_t(f)])
+        for (int k = 0; k < 3; ++k) {
+          const int a = F(f, k), b = F(f, (k + 1) % 3);
+          cand.push_back({(V.row(a) - V.row(b)).norm(), {std::min(a, b), std::max(a, b)}});
+        }
+    std::sort(cand.begin(), cand.end());
+    cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
+    std::vector<char> lock(static_cast<std::size_t>(nv), 0), gone(static_cast<std::size_t>(nv), 0),
+        dead(static_cast<std::size_t>(nf), 0);
+    int collapses = 0;
+    std::vector<int> star, ring_a, ring_b;
+    std::vector<Eigen::Vector3d> normals;
+    std::vector<int> kept;
+    for (const auto& [len, e] : cand) {
+      (void)len;
+      const int a = e.first, b = e.second;
+      if (lock[std::size_t(a)] || lock[std::size_t(b)]) continue;
+      auto ring = [&](int v, std::vector<int>& out) {
+        out.clear();
+        for (int f : vf[std::size_t(v)])
+          for (int k = 0; k < 3; ++k)
+            if (F(f, k) != v) out.push_back(F(f, k));
+        std::sort(out.begin(), out.end());
+        out.erase(std::unique(out.begin(), out.end()), out.end());
+      };
+      ring(a, ring_a);
+      ring(b, ring_b);
+      int shared_faces = 0;
+      for (int f : vf[std::size_t(a)])
+        shared_faces += F(f, 0) == b || F(f, 1) == b || F(f, 2) == b;
+      std::vector<int> common;
+      std::set_intersection(ring_a.begin(), ring_a.end(), ring_b.begin(), ring_b.end(), std::back_inserter(common));
+      if (shared_faces != 2 || common.size() != 2) continue;  // boundary edge or link condition fails
+      star.assign(vf[std::size_t(a)].begin(), vf[std::size_t(a)].end());
+      star.insert(star.end(), vf[std::size_t(b)].begin(), vf[std::size_t(b)].end());
+      std::sort(star.begin(), star.end());
+      star.erase(std::unique(star.begin(), star.end()), star.end());
+      int before = 0;
+      for (int f : star) before += bad[std::size_t(f)];
+      const Eigen::RowVector3d pa = V.row(a), pb = V.row(b);
+      int best_count = std::numeric_limits<int>::max();
+      double best_area = -1;
+      Eigen::RowVector3d best_pos = pa;
+      for (double t : {0.5, 0.0, 1.0, 0.25, 0.75}) {
+        const Eigen::RowVector3d x = (1 - t) * pa + t * pb;
+        V.row(a) = x;
+        V.row(b) = x;
+        int after = 0;
+        double min_area = std::numeric_limits<double>::max();
+        bool ok = true;
+        Eigen::Vector3d mean_n = Eigen::Vector3d::Zero();
+        normals.clear();
+        kept.clear();
+        for (int f : star) {
+          const bool ha = F(f, 0) == a || F(f, 1) == a || F(f, 2) == a, hb = F(f, 0) == b || F(f, 1) == b || F(f, 2) == b;
+          if (ha && hb) continue;  // removed by the collapse
+          Eigen::Vector3d cen;
+          double ar;
+          const Eigen::Vector3d n = tri(F(f, 0), F(f, 1), F(f, 2), cen, ar);
+          if (ar < min_area2) {
+            ok = false;
+            break;
+          }
+          const Eigen::Vector3d r = reference_normal(cen);
+          const bool is_bad = r.squaredNorm() > 0 && n.dot(r) < min_cosine;
+          after += is_bad;
+          min_area = std::min(min_area, ar);
+          if (is_bad) continue;  // still part of the pleat: the fold checks below are for the rest
+          mean_n += ar * n;
+          normals.push_back(n);
+          kept.push_back(f);
+        }
+        if (ok)
+          for (const Eigen::Vector3d& n : normals) ok = ok && n.dot(mean_n) >= 0;  // no new crumple
+        for (std::size_t i = 0; ok && i < kept.size(); ++i)  // no edge bent back by more than 120°
+          for (std::size_t j = i + 1; ok && j < kept.size(); ++j) {
+            int shared = 0;
+            for (int s = 0; s < 3; ++s)
+              for (int t2 = 0; t2 < 3; ++t2) shared += F(kept[i], s) == F(kept[j], t2) ||
+                                                       (F(kept[i], s) == b && F(kept[j], t2) == a) ||
+                                                       (F(kept[i], s) == a && F(kept[j], t2) == b);
+            ok = shared < 2 || normals[i].dot(normals[j]) >= -0.5;
+          }
+        for (std::size_t i = 0; ok && i < kept.size(); ++i)  // ... nor against the faces around the star
+          for (int s = 0; ok && s < 3; ++s) {
+            const int p = F(kept[i], s), q = F(kept[i], (s + 1) % 3);
+            if (p == a || p == b || q == a || q == b) continue;
+            for (int g : vf[std::size_t(p)]) {
+              if (g == kept[i] || std::binary_search(star.begin(), star.end(), g)) continue;
+              if (F(g, 0) != q && F(g, 1) != q && F(g, 2) != q) continue;
+              if (dead[std::size_t(g)] || bad[std::size_t(g)]) continue;  // removed this pass / pleat
+              Eigen::Vector3d cen;
+              double ar;
+              const Eigen::Vector3d ng = tri(F(g, 0), F(g, 1), F(g, 2), cen, ar);
+              ok = normals[i].dot(ng) >= -0.5;
+            }
+          }
+        V.row(a) = pa;
+        V.row(b) = pb;
+        if (ok && (after < best_count || (after == best_count && min_area > best_area))) {
+          best_count = after;
+          best_area = min_area;
+          best_pos = x;
+        }
+      }
+      if (best_count >= before) continue;
+      V.row(a) = best_pos;
+      for (int f : vf[std::size_t(b)]) {
+        if (F(f, 0) == a || F(f, 1) == a || F(f, 2) == a) {
+          dead[std::size_t(f)] = 1;
+        } else {
+          for (int k = 0; k < 3; ++k)
+            if (F(f, k) == b) F(f, k) = a;
+        }
+      }
+      for (int f : star)
+        for (int k = 0; k < 3; ++k) lock[std::size_t(F(f, k))] = 1;
+      lock[std::size_t(b)] = 1;
+      gone[std::size_t(b)] = 1;
+      ++collapses;
+    }
+    if (collapses == 0) break;
+    res.collapses += collapses;
+    // compact: drop the removed faces and the merged-away vertices, keep the order
+    Eigen::MatrixX3i F2(nf, 3);
+    Eigen::Index m = 0;
+    for (Eigen::Index f = 0; f < nf; ++f)
+      if (!dead[std::size_t(f)]) F2.row(m++) = F.row(f);
+    F2.conservativeResize(m, 3);
+    std::vector<int> remap(static_cast<std::size_t>(nv), -1);
+    int q = 0;
+    for (Eigen::Index v = 0; v < nv; ++v)
+      if (!gone[std::size_t(v)]) remap[std::size_t(v)] = q++;
+    Eigen::MatrixX3d V2(q, 3);
+    for (Eigen::Index v = 0; v < nv; ++v)
+      if (!gone[std::size_t(v)]) V2.row(remap[std::size_t(v)]) = V.row(v);
+    for (Eigen::Index f = 0; f < m; ++f)
+      for (int k = 0; k < 3; ++k) F2(f, k) = remap[std::size_t(F2(f, k))];
+    for (int& x : map)
+      if (x >= 0) x = remap[std::size_t(x)];
+    V = std::move(V2);
+    F = std::move(F2);
+    res.faces_after = -1;  // recounted below
+  }
+  if (res.faces_after < 0) {
+    int nbad = 0;
+#pragma omp parallel for schedule(dynamic, 1024) reduction(+ : nbad)
+    for (Eigen::Index f = 0; f < F.rows(); ++f) nbad += against(F(f, 0), F(f, 1), F(f, 2));
+    res.faces_after = nbad;
+  }
+  finish();
   return res;
 }
 

@@ -7,6 +7,7 @@
 /// appended), so markers and per-vertex state survive.
 
 #include <Eigen/Core>
+#include <functional>
 #include <vector>
 
 namespace tbsp {
@@ -63,5 +64,39 @@ struct UntangleResult {
 /// sparse solve over the region vertices. \returns counts before/after.
 UntangleResult untangle_local_folds(Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, int rings = 0, int max_rounds = 20,
                                     int max_rings = 3);
+
+struct PleatCollapseResult {
+  int faces_before = 0;  ///< faces against their reference normal before
+  int faces_after = 0;   ///< ... and after
+  int collapses = 0;     ///< edges collapsed
+  int passes = 0;        ///< passes run
+};
+
+/// \brief Removes pleats — strips of faces whose vertices lie out of order along the surface, so
+/// that the faces point against the surface's normal there — by edge collapses. A face is
+/// *against* when its normal n_f has n_f · reference_normal(centroid) < 0; a zero reference
+/// (no data near the face) never counts. Per pass, the edges of those faces are taken shortest
+/// first; an edge (a, b) is collapsed when (1) the link condition holds (a and b share exactly
+/// the two opposite vertices, so the mesh stays manifold), (2) at the best of five positions on
+/// the segment ab (midpoint, ends, quarter points) none of the remaining faces around it
+/// degenerates (area below 1e-3 × the squared median edge length), and none of those the
+/// reference accepts points against their area-weighted mean normal (no new crumple) or is
+/// bent back by more than 120° against a neighbour (no new folded edge), and (3) fewer faces
+/// around it are against their reference than before. A collapse locks its neighbourhood until the next pass;
+/// passes repeat (at most `max_passes`) until none is possible. More than 5 % of the faces
+/// against the reference means it is oriented the other way, not pleats: then nothing changes.
+/// `min_cosine` > 0 also counts faces nearly perpendicular to the reference (n_f · r < min_cosine). Pleats whose vertices are out of
+/// order cannot be fixed by edge flips or by smoothing without flattening detail; merging the
+/// out-of-order vertices removes them with sub-edge-length moves.
+/// Changes connectivity: the merged-away vertices and the removed faces are compacted (order
+/// otherwise kept).
+/// O(passes · (#F + Σ candidate neighbourhoods)), the reference is evaluated ~ 5 × per face
+/// of a neighbourhood tried. Written by hand: CGAL's edge-collapse simplification takes a cost
+/// and placement policy but no "against a reference normal" stop and renumbers the mesh.
+/// \param old_to_new if given, set to the new index of every old vertex (-1: removed).
+/// \pre F is a manifold triangle mesh (boundary allowed).
+PleatCollapseResult collapse_pleats(Eigen::MatrixX3d& V, Eigen::MatrixX3i& F,
+                                    const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& reference_normal,
+                                    std::vector<int>* old_to_new = nullptr, int max_passes = 30, double min_cosine = 0);
 
 }  // namespace tbsp
