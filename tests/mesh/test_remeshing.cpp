@@ -216,3 +216,29 @@ TEST(PleatCollapse, LeavesGoodSurfacesAndFacesWithoutDataAlone) {
   EXPECT_EQ(r.collapses, 0);
   EXPECT_EQ(m.F, m0.F);
 }
+
+// On a curved surface: a vertex dragged along the sphere past its neighbours turns the faces
+// around it inside out; collapsing it into the neighbour it passed leaves a closed sphere
+// (Euler characteristic 2) with every face outwards and every vertex still on the sphere up to
+// the sagitta of an edge.
+TEST(PleatCollapse, RepairsADraggedSphereVertex) {
+  TriMesh m = make_icosphere(3);  // edges ~0.19
+  const Eigen::Index v = 17;
+  const Eigen::Vector3d p = m.V.row(v).transpose();
+  m.V.row(v) = (p + 0.3 * p.unitOrthogonal()).normalized().transpose();
+  const auto outward = [](const Eigen::Vector3d& c) { return Eigen::Vector3d(c.normalized()); };
+  const PleatCollapseResult r = collapse_pleats(m.V, m.F, outward);
+  ASSERT_GT(r.faces_before, 0);
+  EXPECT_EQ(r.faces_after, 0);
+  EXPECT_GE(r.collapses, 1);
+  EXPECT_LE(r.collapses, 3);
+  const Eigen::MatrixX3d FN = face_normals(m.V, m.F);
+  for (Eigen::Index f = 0; f < m.F.rows(); ++f) {
+    const Eigen::Vector3d c = (m.V.row(m.F(f, 0)) + m.V.row(m.F(f, 1)) + m.V.row(m.F(f, 2))).transpose() / 3.0;
+    EXPECT_GT(FN.row(f).dot(c.normalized()), 0.0) << "face " << f;
+  }
+  EXPECT_LT(m.V.rowwise().norm().maxCoeff(), 1.0 + 1e-12);
+  EXPECT_GT(m.V.rowwise().norm().minCoeff(), 0.99);  // midpoints of ~0.2 chords: sagitta < 0.005
+  EXPECT_TRUE(edges_manifold(m.F));
+  EXPECT_EQ(m.V.rows() - unique_edges(m.F).rows() + m.F.rows(), 2);
+}
