@@ -160,10 +160,33 @@ int cmd_fit(FitArgs a) {
   return 0;
 }
 
-int cmd_validate(const std::string& path, const std::string& json_out, bool strict) {
+int cmd_validate(const std::string& path, const std::string& json_out, bool strict, bool self_intersections) {
   const tbsp::TriMesh mesh = tbsp::read_mesh(path);
   const tbsp::MeshReport r = tbsp::validate_mesh(mesh);
   std::cout << path << ": " << r.summary();
+  // self-intersections (exact predicates): only on request, and only where the faces form a
+  // consistently oriented manifold mesh (the other problems above come first)
+  int crossing = -1;
+  std::vector<std::pair<int, int>> pairs;
+  if (self_intersections) {
+    if (r.nonfinite_vertices.empty() && r.bad_index_faces.empty() && r.nonmanifold_edges.empty() &&
+        r.inconsistent_edges.empty() && r.duplicate_faces.empty()) {
+      try {
+        crossing = tbsp::count_self_intersections(mesh.V, mesh.F, &pairs);
+      } catch (const tbsp::InvalidInput& e) {
+        std::cout << "  self-intersections: not checked (" << e.what() << ")\n";
+      }
+    } else {
+      std::cout << "  self-intersections: not checked (fix the problems above first: the test needs a consistently "
+                   "oriented manifold mesh)\n";
+    }
+    if (crossing >= 0) {
+      std::cout << "  self-intersections: " << crossing << " pairs of faces";
+      for (std::size_t k = 0; k < pairs.size() && k < 5; ++k)
+        std::cout << (k == 0 ? " (" : ", ") << pairs[k].first << "-" << pairs[k].second;
+      std::cout << (pairs.size() > 5 ? ", ...)" : pairs.empty() ? "" : ")") << "\n";
+    }
+  }
   if (!json_out.empty()) {
     nlohmann::json j = {{"file", path},
                         {"vertices", r.num_vertices},
@@ -181,9 +204,13 @@ int cmd_validate(const std::string& path, const std::string& json_out, bool stri
                         {"nonmanifold_edges", r.nonmanifold_edges},
                         {"inconsistent_edges", r.inconsistent_edges},
                         {"clean", r.isClean()}};
+    if (self_intersections) {
+      j["self_intersections"] = crossing;  // -1: not checked
+      j["self_intersecting_pairs"] = pairs;
+    }
     tbsp::write_text_file_atomic(json_out, j.dump(2) + "\n");
   }
-  return strict && !r.isClean() ? 4 : 0;
+  return strict && (!r.isClean() || (self_intersections && crossing != 0)) ? 4 : 0;
 }
 
 struct SynthArgs {
@@ -349,6 +376,8 @@ int main(int argc, char** argv) {
   fitc->add_flag("--fairing", fa.p.fairing, "§5.5.3: tangential fairing against fold-overs");
   fitc->add_flag("--no-pleat-collapse", fa.no_pleats,
                  "with --remesh --fairing: keep pleats (faces against the data normals) instead of collapsing them");
+  fitc->add_flag("--check-self-intersections", fa.p.check_self_intersections,
+                 "count the result's intersecting face pairs also without --fairing (with it they are counted and repaired)");
   fitc->add_flag("--refine-rotations", fa.p.refine_rotations, "re-estimate the rotation field from the fit");
   fitc->add_flag("--consistent-normals", fa.p.consistent_normals,
                  "make estimated normals consistent between neighbours after orienting them by the template");
@@ -358,11 +387,14 @@ int main(int argc, char** argv) {
   fitc->add_flag("-q,--quiet", fa.quiet, "no progress bar or summary");
 
   std::string v_mesh, v_json;
-  bool v_strict = false;
+  bool v_strict = false, v_self = false;
   auto* validate = app.add_subcommand("validate", "report mesh problems (non-manifold, degenerate, NaN, ...)");
   validate->add_option("mesh", v_mesh, "mesh file")->required();
   validate->add_option("--json", v_json, "also write the report as JSON");
   validate->add_flag("--strict", v_strict, "exit 4 unless the mesh is clean");
+  validate->add_flag("--self-intersections", v_self,
+                     "also count pairs of faces that cross each other (exact predicates; needs a manifold, consistently "
+                     "oriented mesh; with --strict any crossing exits 4)");
 
   std::string c_in, c_out;
   bool c_ascii = false;
@@ -431,7 +463,7 @@ int main(int argc, char** argv) {
   try {
     if (*deform) return cmd_deform(da);
     if (*fitc) return cmd_fit(fa);
-    if (*validate) return cmd_validate(v_mesh, v_json, v_strict);
+    if (*validate) return cmd_validate(v_mesh, v_json, v_strict, v_self);
     if (*convert) {
       tbsp::MeshWriteOptions o;
       o.binary = !c_ascii;

@@ -142,6 +142,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"propagate_displacements", u.propagate_displacements}, {"refine_rotations", u.refine_rotations},
                      {"laplacian_updating", u.laplacian_updating}, {"remeshing", u.remeshing},
                      {"subdivision_error", u.subdivision_error}, {"fairing", u.fairing}, {"pleat_collapse", u.pleat_collapse},
+                     {"check_self_intersections", u.check_self_intersections},
                      {"radius_steps", u.radius_steps}, {"freeze_constraints", u.freeze_constraints},
                      {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation},
                      {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
@@ -161,6 +162,8 @@ nlohmann::json fit_report_json(const FitReport& r) {
                   {"mean", r.mean}, {"p99", r.p99}, {"coverage_vertices", r.coverage_vertices},
                   {"coverage_points", r.coverage_points}, {"flipped_faces", r.flipped_faces}, {"folded_edges", r.folded_edges},
                   {"local_folds", r.local_folds}, {"untangled_vertices", r.untangled_vertices},
+                  {"self_intersections", r.self_intersections},
+                  {"self_intersections_before_repair", r.self_intersections_before},
                   {"pleat_faces_before", r.pleat_faces_before}, {"pleat_faces_after", r.pleat_faces_after},
                   {"pleat_collapses", r.pleat_collapses}};
   j["timings_s"] = {{"normals", r.t_normals},     {"search_structure", r.t_search}, {"initial_deformation", r.t_initial},

@@ -79,6 +79,37 @@ TEST(Cli, MalformedInputsFailClearlyAndKeepExistingOutputs) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(Cli, ValidateCountsSelfIntersections) {
+  const auto dir = test::temp_dir("cli_selfint");
+  TriMesh m = make_icosphere(3);
+  const std::string good = (dir / "good.ply").string(), poked = (dir / "poked.ply").string(), js = (dir / "v.json").string();
+  write_mesh(good, m);
+  m.V.row(0) *= -1.5;  // a vertex pulled through the far side of the sphere
+  write_mesh(poked, m);
+  CliResult r = run("validate --self-intersections --strict " + good, dir);
+  EXPECT_EQ(r.code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("self-intersections: 0 pairs"), std::string::npos) << r.out;
+  r = run("validate --self-intersections " + poked + " --json " + js, dir);
+  EXPECT_EQ(r.code, 0) << r.err;  // a report, not a failure, without --strict
+  nlohmann::json j;
+  std::ifstream(js) >> j;
+  EXPECT_TRUE(j["clean"].get<bool>());  // no other problem
+  const int n = j["self_intersections"].get<int>();
+  EXPECT_GT(n, 0);
+  EXPECT_EQ(int(j["self_intersecting_pairs"].size()), n);
+  EXPECT_EQ(run("validate --self-intersections --strict " + poked, dir).code, 4);
+  EXPECT_EQ(run("validate --strict " + poked, dir).code, 0);  // not asked for: not checked
+  // a mesh the test cannot run on: said so, not counted as 0
+  const std::string dup = (dir / "dup.off").string();
+  std::ofstream(dup) << "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 2\n";
+  r = run("validate --self-intersections " + dup + " --json " + js, dir);
+  EXPECT_EQ(r.code, 0);
+  EXPECT_NE(r.out.find("not checked"), std::string::npos) << r.out;
+  std::ifstream(js) >> j;
+  EXPECT_EQ(j["self_intersections"].get<int>(), -1);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, DemoProducesOutputs) {
   const auto dir = test::temp_dir("cli_demo");
   const CliResult r = run("demo -q --out " + (dir / "o").string(), dir);

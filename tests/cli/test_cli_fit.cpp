@@ -72,10 +72,12 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_TRUE(j["parameters"]["pleat_collapse"].get<bool>());  // on, but it needs --remesh --fairing:
   EXPECT_EQ(j["metrics"]["pleat_collapses"].get<int>(), 0);     // the template's connectivity is kept
   EXPECT_EQ(j["metrics"]["pleat_faces_before"].get<int>(), 0);
+  EXPECT_FALSE(j["parameters"]["check_self_intersections"].get<bool>());
+  EXPECT_EQ(j["metrics"]["self_intersections"].get<int>(), -1);  // not checked without --fairing
   // detail rounds: same connectivity, the report says what they did, the fit is not worse
   const std::string out2 = (dir / "fit_detail.ply").string(), rep2 = (dir / "r2.json").string();
   ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
-                    " --out " + out2 + " --report " + rep2 + " --detail-rounds 2 --consistent-normals",
+                    " --out " + out2 + " --report " + rep2 + " --detail-rounds 2 --consistent-normals --check-self-intersections",
                 dir, &err),
             0)
       << err;
@@ -83,6 +85,9 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   nlohmann::json j2;
   std::ifstream(rep2) >> j2;
   EXPECT_EQ(j2["parameters"]["detail_rounds"].get<int>(), 2);
+  EXPECT_TRUE(j2["parameters"]["check_self_intersections"].get<bool>());
+  EXPECT_EQ(j2["metrics"]["self_intersections"].get<int>(), 0);  // checked on request: none
+  EXPECT_EQ(j2["metrics"]["self_intersections_before_repair"].get<int>(), -1);  // repaired with --fairing only
   EXPECT_TRUE(j2["parameters"]["consistent_normals"].get<bool>());
   EXPECT_EQ(j2["counts"]["normals_flipped_for_consistency"].get<long>(), 0);  // given normals are left alone
   EXPECT_GT(j2["counts"]["detail_iterations_run"].get<int>(), 0);

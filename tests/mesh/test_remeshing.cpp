@@ -6,6 +6,8 @@
 #include <cmath>
 #include <map>
 
+#include "tbsp/core/error.h"
+#include "tbsp/mesh/mesh_validation.h"
 #include "tbsp/mesh/primitives.h"
 #include "tbsp/mesh/remeshing.h"
 #include "tbsp/mesh/topology.h"
@@ -241,4 +243,37 @@ TEST(PleatCollapse, RepairsADraggedSphereVertex) {
   EXPECT_GT(m.V.rowwise().norm().minCoeff(), 0.99);  // midpoints of ~0.2 chords: sagitta < 0.005
   EXPECT_TRUE(edges_manifold(m.F));
   EXPECT_EQ(m.V.rows() - unique_edges(m.F).rows() + m.F.rows(), 2);
+}
+
+TEST(SelfIntersectionRepair, VertexPulledThroughASphere) {
+  const TriMesh s = make_icosphere(3);
+  TriMesh m = s;
+  const int v = 0;
+  m.V.row(v) *= -1.5;  // its fan now crosses the far side of the sphere
+  const IntersectionRepairResult r = repair_self_intersections(m.V, m.F);
+  EXPECT_GT(r.pairs_before, 0);
+  EXPECT_EQ(r.pairs_after, 0);
+  EXPECT_EQ(count_self_intersections(m.V, m.F), 0);
+  EXPECT_GT(r.rounds, 0);
+  EXPECT_GT(r.vertices_moved, 0);
+  // the vertex no longer pokes through the far side (it stops inside, as a pit: the repair
+  // removes crossings, not dents), and only the neighbourhoods of the crossings moved
+  EXPECT_LT(m.V.row(v).norm(), 1.0);
+  int far = 0;
+  for (Eigen::Index i = 0; i < m.V.rows(); ++i) far += (m.V.row(i) - s.V.row(i)).norm() > 1e-12;
+  EXPECT_EQ(far, r.vertices_moved);
+  EXPECT_LT(r.vertices_moved, int(m.V.rows()) / 4);
+  EXPECT_EQ(count_local_folds(m.V, m.F), 0);
+}
+
+TEST(SelfIntersectionRepair, CleanMeshUntouchedAndBadMeshRejected) {
+  TriMesh m = make_icosphere(2);
+  const Eigen::MatrixX3d V0 = m.V;
+  const IntersectionRepairResult r = repair_self_intersections(m.V, m.F);
+  EXPECT_EQ(r.pairs_before, 0);
+  EXPECT_EQ(r.rounds, 0);
+  EXPECT_EQ(m.V, V0);
+  Eigen::MatrixX3i G(m.F.rows() + 1, 3);  // a third face on an edge
+  G << m.F, m.F.row(0);
+  EXPECT_THROW(repair_self_intersections(m.V, G), InvalidInput);
 }

@@ -108,3 +108,117 @@ TEST(PclConversions, RoundTripAndPolygons) {
   quad.polygons[0].vertices = {0, 1, 17};
   EXPECT_THROW(from_pcl(quad), InvalidInput);
 }
+
+// ---- count_self_intersections
+
+namespace {
+TriMesh two_spheres(double offset) {  // two unit icospheres in one mesh, the second shifted along x
+  const TriMesh s = make_icosphere(2);
+  TriMesh m;
+  m.V.resize(2 * s.V.rows(), 3);
+  m.F.resize(2 * s.F.rows(), 3);
+  m.V.topRows(s.V.rows()) = s.V;
+  m.V.bottomRows(s.V.rows()) = s.V;
+  m.V.bottomRows(s.V.rows()).col(0).array() += offset;
+  m.F.topRows(s.F.rows()) = s.F;
+  m.F.bottomRows(s.F.rows()) = s.F.array() + int(s.V.rows());
+  return m;
+}
+}  // namespace
+
+TEST(SelfIntersections, CleanSurfacesHaveNone) {
+  for (const TriMesh& m : {make_icosphere(3), make_tube(6, 12), make_box(3, 3, 3), make_grid(5, 4, 1, 1, 0.2, 3), two_spheres(2.5)}) {
+    std::vector<std::pair<int, int>> pairs;
+    int degenerate = -1;
+    EXPECT_EQ(count_self_intersections(m.V, m.F, &pairs, &degenerate), 0);
+    EXPECT_TRUE(pairs.empty());
+    EXPECT_EQ(degenerate, 0);
+  }
+}
+
+TEST(SelfIntersections, InterpenetratingSpheres) {
+  const TriMesh m = two_spheres(1.0);  // the spheres cross along a circle of radius sqrt(3)/2
+  std::vector<std::pair<int, int>> pairs;
+  const int n = count_self_intersections(m.V, m.F, &pairs);
+  EXPECT_GT(n, 20);  // the circle crosses dozens of faces of each sphere
+  ASSERT_EQ(int(pairs.size()), n);
+  const int nf = int(m.F.rows()) / 2;
+  for (const auto& [a, b] : pairs) {
+    EXPECT_LT(a, b);
+    EXPECT_TRUE(a < nf && b >= nf) << a << " " << b;  // one face of each sphere
+    // both faces reach the plane x = 0.5 where the spheres meet
+    for (int f : {a, b}) {
+      double lo = 1e9, hi = -1e9;
+      for (int k = 0; k < 3; ++k) {
+        lo = std::min(lo, m.V(m.F(f, k), 0));
+        hi = std::max(hi, m.V(m.F(f, k), 0));
+      }
+      EXPECT_LE(lo, 0.5 + 1e-12);
+      EXPECT_GE(hi, 0.5 - 1e-12);
+    }
+  }
+}
+
+TEST(SelfIntersections, VertexPulledThroughTheSurface) {
+  TriMesh m = make_icosphere(3);
+  const int v = 0;
+  m.V.row(v) *= -1.5;  // its fan now crosses the far side of the sphere
+  std::vector<std::pair<int, int>> pairs;
+  ASSERT_GT(count_self_intersections(m.V, m.F, &pairs), 0);
+  for (const auto& [a, b] : pairs) {  // every crossing involves a face of the moved vertex
+    const bool fa = m.F(a, 0) == v || m.F(a, 1) == v || m.F(a, 2) == v;
+    const bool fb = m.F(b, 0) == v || m.F(b, 1) == v || m.F(b, 2) == v;
+    EXPECT_TRUE(fa || fb) << a << " " << b;
+  }
+}
+
+TEST(SelfIntersections, FoldedFlatOntoItselfAndTouchingOnly) {
+  Eigen::MatrixX3d V(4, 3);
+  V << 0, 0, 0, 1, 0, 0, 0.3, 1, 0, 0.6, 1, 0;
+  Eigen::MatrixX3i F(2, 3);
+  F << 0, 1, 2, 1, 0, 3;  // shares edge 0-1, third corners on the same side: folded flat, overlapping
+  EXPECT_EQ(count_self_intersections(V, F), 1);
+  V(3, 1) = -1;  // unfolded: a flat quad
+  EXPECT_EQ(count_self_intersections(V, F), 0);
+  V(3, 2) = 1e-9;  // bent by a hair: still only the shared edge in common
+  EXPECT_EQ(count_self_intersections(V, F), 0);
+  // two triangles touching at one shared vertex only
+  Eigen::MatrixX3d W(5, 3);
+  W << 0, 0, 0, 1, 0, 0, 0, 1, 0, -1, 0, 0, 0, -1, 0;
+  Eigen::MatrixX3i G(2, 3);
+  G << 0, 1, 2, 0, 3, 4;
+  EXPECT_EQ(count_self_intersections(W, G), 0);
+}
+
+TEST(SelfIntersections, DegenerateFacesAreCountedApart) {
+  Eigen::MatrixX3d V(4, 3);
+  V << 0, 0, 0, 1, 0, 0, 2, 0, 0, 0, 1, 0;  // 0, 1, 2 collinear
+  Eigen::MatrixX3i F(2, 3);
+  F << 0, 1, 2, 1, 0, 3;
+  int degenerate = 0;
+  EXPECT_EQ(count_self_intersections(V, F, nullptr, &degenerate), 0);
+  EXPECT_EQ(degenerate, 1);
+}
+
+TEST(SelfIntersections, BadInputIsRejected) {
+  TriMesh m = make_icosphere(1);
+  Eigen::MatrixX3i F = m.F;
+  F(3, 1) = int(m.V.rows());
+  try {
+    count_self_intersections(m.V, F);
+    FAIL() << "an index out of range was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("face 3"), std::string::npos) << e.what();
+  }
+  Eigen::MatrixX3d V = m.V;
+  V(2, 0) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(count_self_intersections(V, m.F), InvalidInput);
+  Eigen::MatrixX3i G(m.F.rows() + 1, 3);  // a third face on an edge: not manifold
+  G << m.F, m.F.row(0);
+  try {
+    count_self_intersections(m.V, G);
+    FAIL() << "a non-manifold mesh was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("manifold"), std::string::npos) << e.what();
+  }
+}

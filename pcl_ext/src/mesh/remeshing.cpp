@@ -10,6 +10,7 @@
 
 #include <Eigen/SparseCholesky>
 
+#include "tbsp/mesh/mesh_validation.h"
 #include "tbsp/mesh/topology.h"
 
 #include "tbsp/mesh/tri_mesh.h"
@@ -541,6 +542,40 @@ PleatCollapseResult collapse_pleats(Eigen::MatrixX3d& V, Eigen::MatrixX3i& F,
     res.faces_after = nbad;
   }
   finish();
+  return res;
+}
+
+IntersectionRepairResult repair_self_intersections(Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, int max_rounds) {
+  IntersectionRepairResult res;
+  std::vector<std::pair<int, int>> pairs;
+  res.pairs_before = res.pairs_after = count_self_intersections(V, F, &pairs);
+  if (res.pairs_before == 0) return res;
+  const auto adj = vertex_adjacency(F, V.rows());
+  std::vector<char> moved(static_cast<std::size_t>(V.rows()), 0);
+  for (int round = 0; round < max_rounds && res.pairs_after > 0; ++round) {
+    std::vector<char> region(static_cast<std::size_t>(V.rows()), 0);
+    for (const auto& [a, b] : pairs)
+      for (int f : {a, b})
+        for (int k = 0; k < 3; ++k) region[std::size_t(F(f, k))] = 1;
+    for (int ring = 0; ring < round / 10; ++ring) {  // crossings that persist: a wider region
+      const std::vector<char> prev = region;
+      for (Eigen::Index i = 0; i < V.rows(); ++i)
+        if (prev[std::size_t(i)])
+          for (int j : adj[std::size_t(i)]) region[std::size_t(j)] = 1;
+    }
+    Eigen::MatrixX3d Vs = V;
+    for (Eigen::Index i = 0; i < V.rows(); ++i) {
+      if (!region[std::size_t(i)] || adj[std::size_t(i)].empty()) continue;
+      Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+      for (int j : adj[std::size_t(i)]) c += V.row(j);
+      Vs.row(i) = 0.5 * V.row(i) + 0.5 * c / double(adj[std::size_t(i)].size());
+      moved[std::size_t(i)] = 1;
+    }
+    V = Vs;
+    ++res.rounds;
+    res.pairs_after = count_self_intersections(V, F, &pairs);
+  }
+  for (char m : moved) res.vertices_moved += m;
   return res;
 }
 

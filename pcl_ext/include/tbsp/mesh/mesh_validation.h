@@ -55,4 +55,23 @@ struct MeshRequirements {
 /// \returns the report (for callers that want the counts).
 MeshReport require_valid_mesh(const TriMesh& mesh, const MeshRequirements& req, const std::string& who);
 
+/// \brief Self-intersections: pairs of faces that intersect other than along the edge or at the
+/// vertex they share — a surface folded through itself (the thesis's "self intersections due
+/// to fold-overs", §5.5.3) or two parts that interpenetrate. Faces that only touch at a shared
+/// edge or vertex do not count.
+///
+/// Uses CGAL::Polygon_mesh_processing::self_intersections on a CGAL::Surface_mesh with exact
+/// predicates (Epick), so nearly coplanar slivers are decided exactly. Cost: O(#F log #F +
+/// #candidate pairs) (box intersection of the faces' bounding boxes); 0.15 s for 110k faces
+/// here.
+/// \param pairs if given, receives the intersecting pairs as row indices of F (first < second),
+///        sorted.
+/// \param degenerate_faces if given, receives the number of faces with collinear corners
+///        (CGAL tests them separately; they are not counted as intersections).
+/// \returns the number of intersecting face pairs.
+/// \throws InvalidInput for non-finite coordinates, an index out of range, or faces that do not
+///         form a consistently oriented manifold triangle mesh (the message names the face).
+int count_self_intersections(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
+                             std::vector<std::pair<int, int>>* pairs = nullptr, int* degenerate_faces = nullptr);
+
 }  // namespace tbsp

@@ -99,4 +99,23 @@ PleatCollapseResult collapse_pleats(Eigen::MatrixX3d& V, Eigen::MatrixX3i& F,
                                     const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& reference_normal,
                                     std::vector<int>* old_to_new = nullptr, int max_passes = 30, double min_cosine = 0);
 
+struct IntersectionRepairResult {
+  int pairs_before = 0;    ///< intersecting face pairs (count_self_intersections) before
+  int pairs_after = 0;     ///< ... and after
+  int rounds = 0;          ///< smoothing rounds run
+  int vertices_moved = 0;  ///< distinct vertices moved
+};
+
+/// \brief Removes self-intersections — faces passing through each other, e.g. a pleat pushed
+/// through the surface next to it — by umbrella smoothing. Per round, the vertices of the
+/// intersecting faces (grown by one ring per 10 rounds while crossings persist) move half-way
+/// to the centroid of their neighbours, and the mesh is checked again (count_self_intersections,
+/// exact predicates); at most `max_rounds` rounds. Connectivity is unchanged; only vertices near
+/// crossings move, so detail elsewhere is kept. A crossing between two distant parts of the
+/// surface that touch over a large area (e.g. two interpenetrating components) needs more
+/// rounds than that and is left (pairs_after > 0).
+/// Cost: rounds × (O(#F log #F) check + O(region) smoothing).
+/// \throws InvalidInput as count_self_intersections (not a manifold, consistently oriented mesh).
+IntersectionRepairResult repair_self_intersections(Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, int max_rounds = 50);
+
 }  // namespace tbsp
