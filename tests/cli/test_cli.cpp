@@ -24,7 +24,7 @@ TEST(Cli, DeformWritesMeshAndReport) {
   const auto dir = test::temp_dir("cli_ok");
   const std::string out = (dir / "bent.ply").string(), rep = (dir / "r.json").string();
   const CliResult r = run("deform -q --mesh " + test::sample("bumpy_bar.off") + " --constraints " + test::sample("bend_90.json") +
-                        " --out " + out + " --rotation-field --report " + rep,
+                        " --out " + out + " --rotation-field --check-self-intersections --report " + rep,
                     dir);
   ASSERT_EQ(r.code, 0) << r.err;
   const TriMesh m = read_mesh(out);
@@ -37,6 +37,32 @@ TEST(Cli, DeformWritesMeshAndReport) {
   EXPECT_EQ(j["residuals"]["by_type"]["hard"]["max"].get<double>(), 0.0);
   EXPECT_TRUE(j["solver"]["rotation_field"].get<bool>());
   EXPECT_EQ(j["residuals"]["constraints"].size(), 146u);
+  EXPECT_EQ(j["self_intersections"]["input"].get<int>(), 0);  // the 90° bend crosses nothing
+  EXPECT_EQ(j["self_intersections"]["output"].get<int>(), 0);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Cli, DeformReportsTheCrossingsItMade) {
+  // a sphere whose vertex 0 is pulled through the far side, which is held: the deformation pushes
+  // the surface through itself, and the report says so
+  const auto dir = test::temp_dir("cli_cross");
+  const TriMesh m = make_icosphere(3);
+  const std::string in = (dir / "s.ply").string(), cons = (dir / "c.json").string(), out = (dir / "o.ply").string(),
+                    rep = (dir / "r.json").string();
+  write_mesh(in, m);
+  nlohmann::json c;
+  const Eigen::RowVector3d v0 = m.V.row(0);
+  c["constraints"].push_back({{"vertex", 0}, {"target", {-1.5 * v0(0), -1.5 * v0(1), -1.5 * v0(2)}}});
+  for (Eigen::Index i = 1; i < m.V.rows(); ++i)
+    if (m.V.row(i).dot(v0) < -0.3) c["constraints"].push_back({{"vertex", i}, {"target", {m.V(i, 0), m.V(i, 1), m.V(i, 2)}}});
+  std::ofstream(cons) << c.dump();
+  const CliResult r = run("deform --mesh " + in + " --constraints " + cons + " --out " + out + " --check-self-intersections --report " + rep, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("self-intersecting face pairs: 0 in the input"), std::string::npos) << r.out;
+  nlohmann::json j;
+  std::ifstream(rep) >> j;
+  EXPECT_EQ(j["self_intersections"]["input"].get<int>(), 0);
+  EXPECT_GT(j["self_intersections"]["output"].get<int>(), 0);
   std::filesystem::remove_all(dir);
 }
 
