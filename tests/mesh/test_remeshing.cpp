@@ -277,3 +277,35 @@ TEST(SelfIntersectionRepair, CleanMeshUntouchedAndBadMeshRejected) {
   G << m.F, m.F.row(0);
   EXPECT_THROW(repair_self_intersections(m.V, G), InvalidInput);
 }
+
+TEST(Topology, GrowRegionAndUmbrellaStep) {
+  const TriMesh g = make_grid(4, 4);  // 5 x 5 vertices, row-major
+  const auto adj = vertex_adjacency(g.F, g.V.rows());
+  std::vector<char> region(std::size_t(g.V.rows()), 0);
+  region[12] = 1;  // the centre
+  grow_region(region, adj, 1);
+  int n = 0;
+  for (char c : region) n += c;
+  EXPECT_EQ(n, 1 + int(adj[12].size()));
+  grow_region(region, adj, 5);  // the whole grid
+  n = 0;
+  for (char c : region) n += c;
+  EXPECT_EQ(n, int(g.V.rows()));
+  // an umbrella step moves a lifted centre vertex half-way to its neighbours' mean and nothing else
+  Eigen::MatrixX3d V = g.V;
+  V(12, 2) = 1.0;
+  std::vector<char> only(std::size_t(g.V.rows()), 0), moved(std::size_t(g.V.rows()), 0);
+  only[12] = 1;
+  umbrella_step(V, adj, only, 0.5, &moved);
+  EXPECT_NEAR(V(12, 2), 0.5, 1e-12);
+  Eigen::RowVector3d mean = Eigen::RowVector3d::Zero();
+  for (int j : adj[12]) mean += g.V.row(j);
+  mean /= double(adj[12].size());
+  EXPECT_NEAR(V(12, 0), 0.5 * g.V(12, 0) + 0.5 * mean(0), 1e-12);
+  EXPECT_EQ(moved[12], 1);
+  for (Eigen::Index i = 0; i < V.rows(); ++i)
+    if (i != 12) {
+      EXPECT_EQ(V.row(i), g.V.row(i));
+      EXPECT_EQ(moved[std::size_t(i)], 0);
+    }
+}

@@ -1159,22 +1159,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
           const int bad = folded_edges(V, &mark);  // geometric: independent of estimated normals
           if (bad == 0) break;
           std::vector<char> region = mark;
-          for (int ring = 0; ring < 1 + round / 5; ++ring) {  // the region grows while folds persist
-            const std::vector<char> prev = region;
-            for (Eigen::Index i = 0; i < V.rows(); ++i)
-              if (prev[std::size_t(i)])
-                for (int j : adj[std::size_t(i)]) region[std::size_t(j)] = 1;
-          }
-          for (int step = 0; step < 5; ++step) {
-            Eigen::MatrixX3d Vs = V;
-            for (Eigen::Index i = 0; i < V.rows(); ++i) {
-              if (!region[std::size_t(i)] || adj[std::size_t(i)].empty()) continue;
-              Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
-              for (int j : adj[std::size_t(i)]) c += V.row(j);
-              Vs.row(i) = 0.5 * V.row(i) + 0.5 * c / double(adj[std::size_t(i)].size());
-            }
-            V = Vs;
-          }
+          grow_region(region, adj, 1 + round / 5);  // the region grows while folds persist
+          for (int step = 0; step < 5; ++step) umbrella_step(V, adj, region);
         }
         // small crumples that bend no single edge back (local_folds): their vertices are re-placed
         // by the membrane of their one-ring, grown by one ring only where that is not enough (a
@@ -1209,12 +1195,14 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // ---- self-intersection repair (with fairing): faces that pass through each other (a pleat
   // pushed through the surface next to it) are smoothed apart (repair_self_intersections); the
   // fold repair then runs again on any edge that bent
+  int known_crossings = -1;
   if (u.fairing) {
     t0 = Clock::now();
     try {
       const IntersectionRepairResult ir = repair_self_intersections(V, F);
       rep.self_intersections_before = ir.pairs_before;
       if (ir.pairs_before > 0) fold_repair();
+      else known_crossings = 0;  // nothing moved: no need to count again for the report
     } catch (const InvalidInput&) {
       // not a manifold mesh (a template accepted as is): reported as -1 below
     }
@@ -1247,7 +1235,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     rep.local_folds = u.fairing ? count_local_folds(V, F) : -1;  // 0.11 s on 86k faces: with the fold repair only
     if (u.fairing && rep.local_folds > 0)
       rep.message += std::to_string(rep.local_folds) + " faces still fold against their surroundings after the fold repair. ";
-    if (u.fairing || u.check_self_intersections) {
+    if (known_crossings >= 0) {
+      rep.self_intersections = known_crossings;
+    } else if (u.fairing || u.check_self_intersections) {
       try {
         rep.self_intersections = count_self_intersections(V, F);
       } catch (const InvalidInput&) {

@@ -557,21 +557,8 @@ IntersectionRepairResult repair_self_intersections(Eigen::MatrixX3d& V, const Ei
     for (const auto& [a, b] : pairs)
       for (int f : {a, b})
         for (int k = 0; k < 3; ++k) region[std::size_t(F(f, k))] = 1;
-    for (int ring = 0; ring < round / 10; ++ring) {  // crossings that persist: a wider region
-      const std::vector<char> prev = region;
-      for (Eigen::Index i = 0; i < V.rows(); ++i)
-        if (prev[std::size_t(i)])
-          for (int j : adj[std::size_t(i)]) region[std::size_t(j)] = 1;
-    }
-    Eigen::MatrixX3d Vs = V;
-    for (Eigen::Index i = 0; i < V.rows(); ++i) {
-      if (!region[std::size_t(i)] || adj[std::size_t(i)].empty()) continue;
-      Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
-      for (int j : adj[std::size_t(i)]) c += V.row(j);
-      Vs.row(i) = 0.5 * V.row(i) + 0.5 * c / double(adj[std::size_t(i)].size());
-      moved[std::size_t(i)] = 1;
-    }
-    V = Vs;
+    grow_region(region, adj, round / 10);  // crossings that persist: a wider region
+    umbrella_step(V, adj, region, 0.5, &moved);
     ++res.rounds;
     res.pairs_after = count_self_intersections(V, F, &pairs);
   }

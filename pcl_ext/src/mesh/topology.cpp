@@ -63,4 +63,27 @@ int connected_components(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, E
   return k;
 }
 
+void grow_region(std::vector<char>& region, const std::vector<std::vector<int>>& adj, int rings) {
+  for (int ring = 0; ring < rings; ++ring) {
+    const std::vector<char> prev = region;
+    for (std::size_t i = 0; i < prev.size() && i < adj.size(); ++i)
+      if (prev[i])
+        for (int j : adj[i]) region[std::size_t(j)] = 1;
+  }
+}
+
+void umbrella_step(Eigen::MatrixX3d& V, const std::vector<std::vector<int>>& adj, const std::vector<char>& region,
+                   double lambda, std::vector<char>* moved) {
+  Eigen::MatrixX3d Vs = V;
+  for (Eigen::Index i = 0; i < V.rows(); ++i) {
+    const std::size_t k = std::size_t(i);
+    if (k >= region.size() || k >= adj.size() || !region[k] || adj[k].empty()) continue;
+    Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+    for (int j : adj[k]) c += V.row(j);
+    Vs.row(i) = (1 - lambda) * V.row(i) + lambda * c / double(adj[k].size());
+    if (moved) (*moved)[k] = 1;
+  }
+  V = Vs;
+}
+
 }  // namespace tbsp

@@ -17,4 +17,14 @@ std::vector<std::vector<int>> vertex_adjacency(const Eigen::MatrixX3i& F, Eigen:
 /// component). Returns k. O(#F α).
 int connected_components(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, Eigen::VectorXi& labels);
 
+/// Adds the neighbours (per `adj`, e.g. vertex_adjacency) of the marked vertices to `region`,
+/// `rings` times. O(rings · Σ neighbours).
+void grow_region(std::vector<char>& region, const std::vector<std::vector<int>>& adj, int rings = 1);
+
+/// One uniform umbrella (Laplacian) smoothing step on the marked vertices, all moved at once:
+/// v ← (1 − λ) v + λ · mean of its neighbours. Unmarked vertices and vertices without
+/// neighbours stay. If `moved` is given (sized #V), the vertices moved are set to 1 in it.
+void umbrella_step(Eigen::MatrixX3d& V, const std::vector<std::vector<int>>& adj, const std::vector<char>& region,
+                   double lambda = 0.5, std::vector<char>* moved = nullptr);
+
 }  // namespace tbsp
