@@ -175,7 +175,15 @@ int cmd_fit(FitArgs a) {
   return 0;
 }
 
-int cmd_validate(const std::string& path, const std::string& json_out, bool strict, bool self_intersections) {
+struct ValidateArgs {
+  std::string mesh, json, against;
+  bool strict = false, self_intersections = false;
+  double probe = 0;  // 0: 0.1 % of the reference's bounding-box diagonal
+};
+
+int cmd_validate(const ValidateArgs& a) {
+  const std::string& path = a.mesh;
+  const bool self_intersections = a.self_intersections;
   const tbsp::TriMesh mesh = tbsp::read_mesh(path);
   const tbsp::MeshReport r = tbsp::validate_mesh(mesh);
   std::cout << path << ": " << r.summary();
@@ -202,7 +210,26 @@ int cmd_validate(const std::string& path, const std::string& json_out, bool stri
       std::cout << (pairs.size() > 5 ? ", ...)" : pairs.empty() ? "" : ")") << "\n";
     }
   }
-  if (!json_out.empty()) {
+  // orientation against a reference surface (the scan a fit was made from): faces that point into it
+  tbsp::ReferenceOrientation ori;
+  if (!a.against.empty()) {
+    const tbsp::TriMesh ref = tbsp::read_mesh(a.against);
+    if (ref.F.rows() == 0)
+      throw tbsp::InvalidInput("[tbsp validate] " + a.against +
+                               " has no faces: --against needs the reference as a surface mesh (a point cloud cannot be "
+                               "probed; reconstruct it or pass the scan's mesh)");
+    const double diag = (ref.V.colwise().maxCoeff() - ref.V.colwise().minCoeff()).norm();
+    const double d = a.probe > 0 ? a.probe : 0.001 * diag;
+    if (!(d > 0)) throw tbsp::InvalidInput("[tbsp validate] " + a.against + " is a single point; give --probe-distance");
+    ori = tbsp::check_orientation_against(mesh.V, mesh.F, ref.V, ref.F, d);
+    std::cout << "  orientation against " << a.against << " (probe +-" << d << "): " << ori.consistent << " faces agree, "
+              << ori.flipped << " point into it";
+    for (std::size_t k = 0; k < ori.flipped_faces.size() && k < 5; ++k) std::cout << (k == 0 ? " (" : ", ") << ori.flipped_faces[k];
+    std::cout << (ori.flipped_faces.size() > 5 ? ", ...)" : ori.flipped_faces.empty() ? "" : ")") << ", " << ori.unmatched
+              << " not judged (no reference surface within the probe)"
+              << (ori.degenerate ? ", " + std::to_string(ori.degenerate) + " of zero area" : "") << "\n";
+  }
+  if (!a.json.empty()) {
     nlohmann::json j = {{"file", path},
                         {"vertices", r.num_vertices},
                         {"faces", r.num_faces},
@@ -223,9 +250,13 @@ int cmd_validate(const std::string& path, const std::string& json_out, bool stri
       j["self_intersections"] = crossing;  // -1: not checked
       j["self_intersecting_pairs"] = pairs;
     }
-    tbsp::write_text_file_atomic(json_out, j.dump(2) + "\n");
+    if (!a.against.empty())
+      j["against"] = {{"reference", a.against},      {"probe_distance", ori.distance}, {"consistent", ori.consistent},
+                      {"flipped", ori.flipped},      {"flipped_faces", ori.flipped_faces},
+                      {"unmatched", ori.unmatched}, {"degenerate", ori.degenerate}};
+    tbsp::write_text_file_atomic(a.json, j.dump(2) + "\n");
   }
-  return strict && (!r.isClean() || (self_intersections && crossing != 0)) ? 4 : 0;
+  return a.strict && (!r.isClean() || (self_intersections && crossing != 0) || ori.flipped > 0) ? 4 : 0;
 }
 
 struct SynthArgs {
@@ -403,15 +434,21 @@ int main(int argc, char** argv) {
   fitc->add_flag("--no-rotation-field", fa.no_field, "skip the rotation field of §3.2.3");
   fitc->add_flag("-q,--quiet", fa.quiet, "no progress bar or summary");
 
-  std::string v_mesh, v_json;
-  bool v_strict = false, v_self = false;
+  ValidateArgs va;
   auto* validate = app.add_subcommand("validate", "report mesh problems (non-manifold, degenerate, NaN, ...)");
-  validate->add_option("mesh", v_mesh, "mesh file")->required();
-  validate->add_option("--json", v_json, "also write the report as JSON");
-  validate->add_flag("--strict", v_strict, "exit 4 unless the mesh is clean");
-  validate->add_flag("--self-intersections", v_self,
+  validate->add_option("mesh", va.mesh, "mesh file")->required();
+  validate->add_option("--json", va.json, "also write the report as JSON");
+  validate->add_flag("--strict", va.strict, "exit 4 unless the mesh is clean (and, with the checks below, nothing crosses or points into the reference)");
+  validate->add_flag("--self-intersections", va.self_intersections,
                      "also count pairs of faces that cross each other (exact predicates; needs a manifold, consistently "
                      "oriented mesh; with --strict any crossing exits 4)");
+  validate->add_option("--against", va.against,
+                       "reference surface mesh (e.g. the scan a fit was made from): count faces that point into it, probed "
+                       "along each face normal (docs/fitting.md, fold-overs)");
+  validate->add_option("--probe-distance", va.probe,
+                       "half-length of each face's probe along its normal, model units (default 0.1 % of the reference's "
+                       "bounding-box diagonal)")
+      ->check(CLI::PositiveNumber);
 
   std::string c_in, c_out;
   bool c_ascii = false;
@@ -480,7 +517,7 @@ int main(int argc, char** argv) {
   try {
     if (*deform) return cmd_deform(da);
     if (*fitc) return cmd_fit(fa);
-    if (*validate) return cmd_validate(v_mesh, v_json, v_strict, v_self);
+    if (*validate) return cmd_validate(va);
     if (*convert) {
       tbsp::MeshWriteOptions o;
       o.binary = !c_ascii;

@@ -3,6 +3,7 @@
 
 #include <sys/wait.h>
 
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -133,6 +134,51 @@ TEST(Cli, ValidateCountsSelfIntersections) {
   EXPECT_NE(r.out.find("not checked"), std::string::npos) << r.out;
   std::ifstream(js) >> j;
   EXPECT_EQ(j["self_intersections"].get<int>(), -1);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Cli, ValidateAgainstAReference) {
+  const auto dir = test::temp_dir("cli_against");
+  const std::string ref = (dir / "ref.ply").string(), fit = (dir / "fit.ply").string(), inv = (dir / "inv.ply").string(),
+                    js = (dir / "v.json").string(), cloud = (dir / "cloud.ply").string();
+  TriMesh sphere = make_icosphere(4);
+  sphere.V *= 1.02;
+  write_mesh(ref, sphere);
+  TriMesh m = make_icosphere(3);  // centroids 0.02-0.03 inside the reference
+  write_mesh(fit, m);
+  m.F.col(1).swap(m.F.col(2));  // turned inside out
+  write_mesh(inv, m);
+  CliResult r = run("validate --strict " + fit + " --against " + ref + " --probe-distance 0.05 --json " + js, dir);
+  EXPECT_EQ(r.code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("0 point into it"), std::string::npos) << r.out;
+  nlohmann::json j;
+  std::ifstream(js) >> j;
+  EXPECT_EQ(j["against"]["consistent"].get<int>(), m.F.rows());
+  EXPECT_EQ(j["against"]["flipped"].get<int>(), 0);
+  EXPECT_DOUBLE_EQ(j["against"]["probe_distance"].get<double>(), 0.05);
+  r = run("validate " + inv + " --against " + ref + " --probe-distance 0.05 --json " + js, dir);
+  EXPECT_EQ(r.code, 0) << r.err;  // a report, not a failure, without --strict
+  std::ifstream(js) >> j;
+  EXPECT_EQ(j["against"]["flipped"].get<int>(), m.F.rows());
+  EXPECT_EQ(int(j["against"]["flipped_faces"].size()), m.F.rows());
+  EXPECT_EQ(run("validate --strict " + inv + " --against " + ref + " --probe-distance 0.05", dir).code, 4);
+  // the default probe (0.1 % of the reference diagonal, 0.0035) does not reach them: not judged,
+  // never counted as flipped
+  r = run("validate " + inv + " --against " + ref + " --json " + js, dir);
+  EXPECT_EQ(r.code, 0) << r.out;
+  std::ifstream(js) >> j;
+  EXPECT_NEAR(j["against"]["probe_distance"].get<double>(), 0.001 * 2.04 * std::sqrt(3.0), 1e-5);
+  EXPECT_EQ(j["against"]["unmatched"].get<int>(), m.F.rows());
+  // bad input: a reference without faces, a missing one, a probe that is not positive
+  std::ofstream(cloud) << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                          "end_header\n0 0 0\n1 0 0\n0 1 0\n";
+  r = run("validate " + fit + " --against " + cloud, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("cloud.ply has no faces"), std::string::npos) << r.err;
+  r = run("validate " + fit + " --against " + (dir / "missing.ply").string(), dir);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("missing.ply"), std::string::npos) << r.err;
+  EXPECT_NE(run("validate " + fit + " --against " + ref + " --probe-distance -1", dir).code, 0);
   std::filesystem::remove_all(dir);
 }
 

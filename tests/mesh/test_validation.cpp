@@ -222,3 +222,101 @@ TEST(SelfIntersections, BadInputIsRejected) {
     EXPECT_NE(std::string(e.what()).find("manifold"), std::string::npos) << e.what();
   }
 }
+
+// --- check_orientation_against: faces probed against a reference surface -----------------------
+
+TEST(OrientationAgainstReference, SphereAgainstAFinerSphere) {
+  const TriMesh ref = make_icosphere(4), coarse = make_icosphere(3);  // centroids up to ~0.01 inside
+  ReferenceOrientation r = check_orientation_against(coarse.V, coarse.F, ref.V, ref.F, 0.05);
+  EXPECT_EQ(r.consistent, coarse.F.rows());
+  EXPECT_EQ(r.flipped, 0);
+  EXPECT_EQ(r.unmatched, 0);
+  EXPECT_DOUBLE_EQ(r.distance, 0.05);
+  TriMesh inverted = coarse;  // every face turned inside out
+  inverted.F.col(1).swap(inverted.F.col(2));
+  r = check_orientation_against(inverted.V, inverted.F, ref.V, ref.F, 0.05);
+  EXPECT_EQ(r.flipped, inverted.F.rows());
+  ASSERT_EQ(int(r.flipped_faces.size()), r.flipped);
+  EXPECT_EQ(r.flipped_faces.front(), 0);
+  EXPECT_EQ(r.flipped_faces.back(), inverted.F.rows() - 1);
+  TriMesh far = coarse;  // 1.5 x: 0.5 off the reference, beyond the probe
+  far.V *= 1.5;
+  r = check_orientation_against(far.V, far.F, ref.V, ref.F, 0.05);
+  EXPECT_EQ(r.unmatched, far.F.rows());
+  r = check_orientation_against(far.V, far.F, ref.V, ref.F, 0.6);  // a longer probe reaches it
+  EXPECT_EQ(r.consistent, far.F.rows());
+}
+
+namespace {
+// A strip along y extruded from a polyline profile in the x-z plane (faces oriented so that a
+// profile running in +x has its normal along +z).
+TriMesh extruded_profile(const std::vector<Eigen::Vector2d>& xz, int ny) {
+  TriMesh m;
+  const int nx = int(xz.size());
+  m.V.resize(nx * (ny + 1), 3);
+  for (int j = 0; j <= ny; ++j)
+    for (int i = 0; i < nx; ++i) m.V.row(j * nx + i) << xz[std::size_t(i)](0), double(j) / ny, xz[std::size_t(i)](1);
+  m.F.resize(2 * (nx - 1) * ny, 3);
+  int f = 0;
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i + 1 < nx; ++i) {
+      const int a = j * nx + i, b = a + 1, c = a + nx, d = c + 1;
+      m.F.row(f++) << a, b, d;
+      m.F.row(f++) << a, d, c;
+    }
+  return m;
+}
+}  // namespace
+
+TEST(OrientationAgainstReference, PleatLyingOnAPlane) {
+  const TriMesh plane = make_grid(10, 10, 4.0, 1.0);  // z = 0, normal +z, x in [0, 4]
+  ASSERT_GT(face_normals(plane.V, plane.F)(0, 2), 0);
+  // an S-pleat hovering 0.01-0.03 over the plane: right at z 0.01, back at z 0.02, right at 0.03
+  const std::vector<Eigen::Vector2d> profile = {{0.2, 0.01}, {1.0, 0.01}, {2.0, 0.01}, {2.0, 0.02}, {1.0, 0.02},
+                                                {0.5, 0.02}, {0.5, 0.03}, {1.5, 0.03}, {3.0, 0.03}};
+  const int ny = 4;
+  const TriMesh pleat = extruded_profile(profile, ny);
+  const ReferenceOrientation r = check_orientation_against(pleat.V, pleat.F, plane.V, plane.F, 0.1);
+  // per row: 2 + 2 + 2 segments on the sheets (normals +z, -z, +z) and 2 upright turns
+  EXPECT_EQ(r.consistent, 2 * ny * 4);
+  EXPECT_EQ(r.flipped, 2 * ny * 2);  // the middle sheet points into the plane
+  EXPECT_EQ(r.unmatched, 2 * ny * 2);  // the turns stand across the plane: the probe runs along it
+  EXPECT_EQ(r.degenerate, 0);
+  const Eigen::MatrixX3d N = face_normals(pleat.V, pleat.F);
+  for (int f : r.flipped_faces) EXPECT_LT(N(f, 2), -0.99) << f;
+  // the same pleat beyond the plane's edge (x > 4) cannot be judged
+  TriMesh beyond = pleat;
+  beyond.V.col(0).array() += 10;
+  const ReferenceOrientation o = check_orientation_against(beyond.V, beyond.F, plane.V, plane.F, 0.1);
+  EXPECT_EQ(o.unmatched, beyond.F.rows());
+}
+
+TEST(OrientationAgainstReference, ThinReferenceCancels) {
+  const TriMesh plate = make_box(4, 4, 1, 1.0, 1.0, 0.01);  // a closed plate 0.01 thick
+  const TriMesh sheet = extruded_profile({{0.1, 0.02}, {0.5, 0.02}, {0.9, 0.02}}, 2);  // just over its top
+  // a short probe meets the top only; one longer than the plate crosses top and bottom: no verdict
+  EXPECT_EQ(check_orientation_against(sheet.V, sheet.F, plate.V, plate.F, 0.015).consistent, sheet.F.rows());
+  EXPECT_EQ(check_orientation_against(sheet.V, sheet.F, plate.V, plate.F, 0.5).unmatched, sheet.F.rows());
+}
+
+TEST(OrientationAgainstReference, BadInputIsRejected) {
+  const TriMesh m = make_icosphere(1);
+  Eigen::MatrixX3i F = m.F;
+  F(3, 1) = -1;
+  try {
+    check_orientation_against(m.V, m.F, m.V, F, 0.1);
+    FAIL() << "an index out of range was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("face 3 of the reference"), std::string::npos) << e.what();
+  }
+  Eigen::MatrixX3d V = m.V;
+  V(2, 1) = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(check_orientation_against(V, m.F, m.V, m.F, 0.1), InvalidInput);
+  EXPECT_THROW(check_orientation_against(m.V, Eigen::MatrixX3i(), m.V, m.F, 0.1), InvalidInput);
+  for (double d : {0.0, -1.0, std::numeric_limits<double>::quiet_NaN()})
+    EXPECT_THROW(check_orientation_against(m.V, m.F, m.V, m.F, d), InvalidInput) << d;
+  // a face of zero area has no normal: counted apart
+  Eigen::MatrixX3d W = m.V;
+  W.row(m.F(0, 1)) = W.row(m.F(0, 0));
+  EXPECT_GE(check_orientation_against(W, m.F, m.V, m.F, 0.1).degenerate, 1);
+}

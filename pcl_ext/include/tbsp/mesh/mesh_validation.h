@@ -74,4 +74,37 @@ MeshReport require_valid_mesh(const TriMesh& mesh, const MeshRequirements& req, 
 int count_self_intersections(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                              std::vector<std::pair<int, int>>* pairs = nullptr, int* degenerate_faces = nullptr);
 
+
+/// \brief Where a mesh (typically a fit) lies on a reference surface (typically the scan it was
+/// fitted to), whether its faces point the same way: the check for fold-overs against the data.
+/// A face is probed by the segment from c − d·n to c + d·n (c its centroid, n its unit normal,
+/// d = `distance`); each reference triangle the segment crosses counts +1 when the segment
+/// leaves the reference through it (travelling along n it goes from the triangle's back to its
+/// front) and −1 when it enters. A positive sum means the face has the reference's inside
+/// behind it, as it should; a negative one means it points into the reference — flipped, as the
+/// middle sheet of a pleat lying on the data is. A sum of 0 means no reference surface within
+/// ±d along the normal (the face bridges a recess, spans a hole, or stands across the surface)
+/// or crossings that cancel (a reference thinner than 2d): such faces cannot be judged and are
+/// counted apart.
+struct ReferenceOrientation {
+  double distance = 0;             ///< d, model units
+  int consistent = 0;              ///< faces whose probe leaves the reference
+  int flipped = 0;                 ///< faces whose probe enters the reference (point into it)
+  int unmatched = 0;               ///< probes with no crossing, or crossings that cancel
+  int degenerate = 0;              ///< faces of zero area (no normal; not probed)
+  std::vector<int> flipped_faces;  ///< row indices of F, sorted
+};
+
+/// \brief Probes every face of (V, F) against the reference (refV, refF); see ReferenceOrientation.
+/// The reference needs consistently oriented faces (outward normals for a closed scan) but need
+/// not be closed: the test is local. `distance` should exceed the fit's distance to the data
+/// (e.g. its p99) and stay below the reference's thinnest part; 0.1 % of the reference's
+/// bounding-box diagonal suits a fit within 0.1 %. Exact segment-triangle predicates (CGAL
+/// Epick) over an AABB tree; O(#refF log #refF + #F log #refF), parallel over the faces (0.3 s
+/// for 110k faces against 269k here).
+/// \throws InvalidInput for an empty mesh or reference, non-finite coordinates, an index out of
+///         range (the message names the mesh and the face) or a distance that is not positive.
+ReferenceOrientation check_orientation_against(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
+                                               const Eigen::MatrixX3d& refV, const Eigen::MatrixX3i& refF,
+                                               double distance);
 }  // namespace tbsp
