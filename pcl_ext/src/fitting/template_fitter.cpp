@@ -1068,24 +1068,19 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // are fold-overs; their vertices and one-rings get umbrella smoothing steps until none is left
   // (at most 30 rounds); then small crumples (count_local_folds) are untangled; repeated while
   // the untangling bends edges back (at most 3 passes).
-  // (flipped_faces, for the report: faces on the data — the cloud point p nearest to the
-  // centre c within r_max, c within ε of p's tangent plane — whose normal is more than 120°
-  // against p's normal NR; off_data receives the faces that are not on the data: over a hole or
-  // bridging a recess, they have no data to be judged against)
-  auto flipped_faces = [&](const Eigen::MatrixX3d& X, const Eigen::MatrixX3d& NR, int* off_data) {
+  // (flipped_faces, for the report: faces whose normal is more than 120° against the cloud
+  // normal NR nearest to their centre)
+  auto flipped_faces = [&](const Eigen::MatrixX3d& X, const Eigen::MatrixX3d& NR) {
     const Eigen::MatrixX3d FN = face_normals(X, F);
-    int flipped = 0, off = 0;
-#pragma omp parallel for schedule(dynamic, 1024) reduction(+ : flipped, off)
+    int flipped = 0;
+#pragma omp parallel for schedule(dynamic, 1024) reduction(+ : flipped)
     for (Eigen::Index f = 0; f < F.rows(); ++f) {
       const Eigen::Vector3d c = (X.row(F(f, 0)) + X.row(F(f, 1)) + X.row(F(f, 2))).transpose() / 3.0;
       double d2 = 0;
       const Eigen::Index k = search.nearest(c, &d2);
-      const bool on = k >= 0 && roi_ok[std::size_t(k)] && d2 < u.max_match_distance * u.max_match_distance &&
-                      std::abs((c - P.row(k).transpose()).dot(NR.row(k))) <= u.subdivision_error;
-      off += !on;
-      flipped += on && FN.row(f).dot(NR.row(k)) < -0.5;
+      flipped += k >= 0 && roi_ok[std::size_t(k)] && d2 < u.max_match_distance * u.max_match_distance &&
+                 FN.row(f).dot(NR.row(k)) < -0.5;
     }
-    if (off_data) *off_data = off;
     return flipped;
   };
   // cloud normals for the fold-over checks: estimated normals are made consistent first (unless
@@ -1235,7 +1230,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     // fold-overs: face normal against the cloud normals near the face centre. Estimated normals
     // are first made consistent for this count (unless the fit already did): a patch the
     // template oriented inwards (a sphere over a concave ledge) is not a patch of flipped faces.
-    rep.flipped_faces = flipped_faces(V, consistent_N(), &rep.faces_off_data);
+    rep.flipped_faces = flipped_faces(V, consistent_N());
     rep.folded_edges = folded_edges(V, nullptr);
     rep.local_folds = u.fairing ? count_local_folds(V, F) : -1;  // 0.11 s on 86k faces: with the fold repair only
     if (u.fairing && rep.local_folds > 0)

@@ -235,15 +235,9 @@ struct FitReport {
   double hausdorff = 0, hausdorff_rel = 0, rms = 0, mean = 0, p99 = 0;
   double coverage_vertices = 0;          ///< fraction of (non-masked) template vertices matched
   double coverage_points = 0;            ///< fraction of ROI points within r_max of the result
-  /// faces on the data whose normal is more than 120° against the normal of the cloud point p
-  /// nearest to their centre c (on the data: p within r_max of c, and c within ε =
-  /// FitParameters::subdivision_error of p's tangent plane); estimated normals are made
-  /// consistent for this count (orient_normals_consistently)
+  /// faces more than 120° against the cloud normal nearest to their centre (within r_max);
+  /// estimated normals are made consistent for this count (orient_normals_consistently)
   int flipped_faces = 0;
-  /// faces not on the data in that sense (over holes, bridging recesses): not judged by
-  /// flipped_faces. A face bridging a recess 0.5 % above it would otherwise be judged against
-  /// the normal of the recess's wall.
-  int faces_off_data = 0;
   int folded_edges = 0;                  ///< edges whose two faces are bent back by more than 120°
   int local_folds = 0;                   ///< faces against their surroundings' normal (count_local_folds); -1: not computed (fairing off)
   int untangled_vertices = 0;            ///< vertices the fold repair re-placed (with fairing)
