@@ -224,7 +224,8 @@ int cmd_validate(const ValidateArgs& a) {
     ori = tbsp::check_orientation_against(mesh.V, mesh.F, ref.V, ref.F, d);
     std::cout << "  orientation against " << a.against << " (probe +-" << d << "): " << ori.consistent << " faces agree, "
               << ori.flipped << " point into it";
-    for (std::size_t k = 0; k < ori.flipped_faces.size() && k < 5; ++k) std::cout << (k == 0 ? " (" : ", ") << ori.flipped_faces[k];
+    for (std::size_t k = 0; k < ori.flipped_faces.size() && k < 5; ++k)
+      std::cout << (k == 0 ? " (" : ", ") << ori.flipped_faces[k];
     std::cout << (ori.flipped_faces.size() > 5 ? ", ...)" : ori.flipped_faces.empty() ? "" : ")") << ", " << ori.unmatched
               << " not judged (no reference surface within the probe)"
               << (ori.degenerate ? ", " + std::to_string(ori.degenerate) + " of zero area" : "") << "\n";
@@ -438,7 +439,9 @@ int main(int argc, char** argv) {
   auto* validate = app.add_subcommand("validate", "report mesh problems (non-manifold, degenerate, NaN, ...)");
   validate->add_option("mesh", va.mesh, "mesh file")->required();
   validate->add_option("--json", va.json, "also write the report as JSON");
-  validate->add_flag("--strict", va.strict, "exit 4 unless the mesh is clean (and, with the checks below, nothing crosses or points into the reference)");
+  validate->add_flag("--strict", va.strict,
+                     "exit 4 unless the mesh is clean (and, with the checks below, nothing crosses or points into the "
+                     "reference)");
   validate->add_flag("--self-intersections", va.self_intersections,
                      "also count pairs of faces that cross each other (exact predicates; needs a manifold, consistently "
                      "oriented mesh; with --strict any crossing exits 4)");

@@ -109,7 +109,8 @@ TEST(SphereToRealScan, IgeaWithUpdatingRemeshingFairing) {
   // lying on the data would). Measured 0 flipped, 105,593 agreeing, 4,653 not judged (farther than
   // the probe from the scan — the bridges — or standing across it). Sweep of the updating weight
   // 1.8 / 1.9 / 2.1 / 2.5: 0 / 2 / 0 / 3 flipped, faces at 98-112° to the normal of the scan face
-  // closest to them (almost across it) where the scan is sharply curved; probes of 0.05 / 0.2 / 0.5 % at weight 2: 1 / 0 / 1 (docs/fitting.md)
+  // closest to them (almost across it) where the scan is sharply curved; probes of 0.05 / 0.2 /
+  // 0.5 % at weight 2: 1 / 0 / 1 (docs/fitting.md)
   const double scan_diag = (scan.V.colwise().maxCoeff() - scan.V.colwise().minCoeff()).norm();
   const ReferenceOrientation against = check_orientation_against(fit.V, fit.F, scan.V, scan.F, 0.001 * scan_diag);
   std::printf("  faces probed against the scan (+-0.1%%): %d agree, %d point into it, %d not judged\n", against.consistent,

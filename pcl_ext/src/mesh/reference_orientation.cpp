@@ -25,7 +25,8 @@ using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
 
 void check_mesh(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::string& who, const std::string& name) {
   if (F.rows() == 0) throw InvalidInput(who + "the " + name + " has no faces");
-  if (!V.allFinite()) throw InvalidInput(who + "the " + name + " has non-finite vertex coordinates; remove or repair those vertices");
+  if (!V.allFinite())
+    throw InvalidInput(who + "the " + name + " has non-finite vertex coordinates; remove or repair those vertices");
   for (Eigen::Index f = 0; f < F.rows(); ++f)
     for (int k = 0; k < 3; ++k)
       if (F(f, k) < 0 || F(f, k) >= V.rows())
