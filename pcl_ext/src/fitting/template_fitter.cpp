@@ -418,6 +418,14 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   std::vector<char> matched(std::size_t(V.rows()), 0);
   Eigen::MatrixX3d target = V;
   std::vector<int> frozen_ids;     // constraint id per vertex while the set is frozen (-1: none)
+  // frozen phase: each vertex's cloud neighbours within nb_cache_r of where it was when they were
+  // found. Frozen iterations move vertices by a small fraction of r, so the radius-r neighbours
+  // are the cached ones within r of the vertex as long as it stays within nb_cache_r - r of the
+  // cache centre (exact; the tree is searched again otherwise). Saves most kd-tree searches of
+  // the frozen iterations.
+  std::vector<std::vector<std::pair<Eigen::Index, double>>> nb_cache;
+  Eigen::MatrixX3d nb_cache_at;
+  std::vector<double> nb_cache_r;
   Eigen::MatrixX3d frozen_target;
   std::vector<double> frozen_moves;  // 99th percentile moves of the frozen iterations
   // displacement propagation inside the frozen iterations (see stage 3)
@@ -463,6 +471,11 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       BinnedCloud b = bin_cloud(P, N, roi_ok, r / 3);
       if (2 * b.count.rows() < np) binned = std::move(b);
     }
+    if (frozen_phase && nb_cache.empty()) {
+      nb_cache.resize(std::size_t(V.rows()));
+      nb_cache_at = Eigen::MatrixX3d::Constant(V.rows(), 3, std::numeric_limits<double>::quiet_NaN());
+      nb_cache_r.assign(std::size_t(V.rows()), 0.0);
+    }
 #pragma omp parallel
     {
       std::vector<std::pair<Eigen::Index, double>> nb;
@@ -493,6 +506,24 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
               sp += w * binned->sum_p.row(k).transpose();
               spp += w * binned->sum_pp[std::size_t(k)];
             }
+          } else if (frozen_phase && rr == r) {
+            // the cached neighbours (see nb_cache), refreshed with a 25 % margin when the
+            // vertex has left the region where they are complete
+            const std::size_t js = std::size_t(j);
+            const double dc = (vj - nb_cache_at.row(j).transpose()).norm();  // NaN before the first search
+            if (!(dc + rr <= nb_cache_r[js])) {
+              nb_cache_r[js] = 1.25 * rr;
+              nb_cache_at.row(j) = vj.transpose();
+              search.radius(vj, nb_cache_r[js], nb_cache[js]);
+            }
+            nb.clear();
+            const double rr2 = rr * rr;
+            for (const auto& e : nb_cache[js]) {
+              const double d2 = (P.row(e.first).transpose() - vj).squaredNorm();
+              if (d2 <= rr2) nb.emplace_back(e.first, d2);
+            }
+            in_ball = double(nb.size());
+            kernel_sums(nb, P, N, roi_ok, nj, cos_max, rr, sw, sp, spp, &sw2);
           } else {
             search.radius(vj, rr, nb);
             in_ball = double(nb.size());

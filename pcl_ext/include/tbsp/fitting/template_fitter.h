@@ -126,7 +126,7 @@ struct FitParameters {
   /// round is one factorization + up to `detail_iterations` matching / back-substitution steps
   /// (stopping at `detail_tolerance`). Keeps the template's connectivity. 0: off. Bunny ground
   /// truth, 30 markers (docs/fitting.md): clean Hausdorff 0.86 → 0.27 % with 4 rounds (seeds
-  /// 1-24: 0.24-0.38 %, 18 within 0.3 %), hole error unchanged; armadillo 43k / 100k points:
+  /// 1-24: 0.23-0.38 %, 17 within 0.3 %), hole error unchanged; armadillo 43k / 100k points:
   /// 4.78 → 2.75 %, ~4.5 s per round (detail_iterations 8 and detail_tolerance = tolerance:
   /// 3.46 %, 1.5-2 s per round). Cost per iteration: O(#points) closest-point updates +
   /// O(#vertices) kernel sums.
