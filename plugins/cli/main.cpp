@@ -380,8 +380,8 @@ int main(int argc, char** argv) {
   CLI::App app{"tbsp - template-based shape processing for PCL pipelines"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "tbsp 0.1.0");
-  bool verbose = false;
-  app.add_flag("-v,--verbose", verbose, "debug logging");
+  int verbose = 0;
+  app.add_flag("-v,--verbose", verbose, "debug logging; -vv: trace (per-iteration timings of factorizations and solves; the extra diagnostics slow a fit down)");
 
   DeformArgs da;
   auto* deform = app.add_subcommand("deform", "Laplacian deformation of a mesh under constraints (thesis ch. 3)");
@@ -515,7 +515,7 @@ int main(int argc, char** argv) {
   demo->add_flag("-q,--quiet", demo_quiet, "no progress bar");
 
   CLI11_PARSE(app, argc, argv);
-  tbsp::logger()->set_level(verbose ? spdlog::level::debug : spdlog::level::warn);
+  tbsp::logger()->set_level(verbose >= 2 ? spdlog::level::trace : verbose == 1 ? spdlog::level::debug : spdlog::level::warn);
   const std::string sub = app.get_subcommands().front()->get_name();
   try {
     if (*deform) return cmd_deform(da);

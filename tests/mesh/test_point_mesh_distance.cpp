@@ -1,11 +1,16 @@
 // closest_point_barycentric (hand-written, Ericson §5.1.5) against analytic cases and against
-// CGAL's exact AABB-tree query (MeshDistance) on random triangles and points.
+// CGAL's exact AABB-tree query (MeshDistance) on random triangles and points; MeshDistance and
+// point_mesh_distances (Embree's BVH) against brute force over every face, also far from the
+// origin, where Embree's single-precision boxes must not cost exactness.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <limits>
 #include <random>
 
 #include "tbsp/core/error.h"
 #include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/mesh/primitives.h"
 
 using namespace tbsp;
 
@@ -66,4 +71,94 @@ TEST(ClosestPointBarycentric, AgreesWithCgalOnRandomTriangles) {
     }
   }
   EXPECT_LT(worst, 1e-9) << "largest distance difference to CGAL";
+}
+
+namespace {
+// distance to the closest face, checking every face: the reference
+double brute_force(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::Vector3d& p) {
+  double best = std::numeric_limits<double>::infinity();
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), c = V.row(F(f, 2)).transpose();
+    best = std::min(best, (at(closest_point_barycentric(p, a, b, c), a, b, c) - p).norm());
+  }
+  return best;
+}
+
+// queries all around, just off the surface and on it (near-ties between faces)
+void expect_exact(const TriMesh& m, const Eigen::Vector3d& centre, double extent, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::uniform_int_distribution<Eigen::Index> pick(0, m.V.rows() - 1);
+  Eigen::MatrixX3d Q(600, 3);
+  for (Eigen::Index i = 0; i < Q.rows(); ++i) {
+    const Eigen::RowVector3d r(u(rng), u(rng), u(rng));
+    if (i % 3 == 0) Q.row(i) = centre.transpose() + 3 * extent * r;
+    else if (i % 3 == 1) Q.row(i) = m.V.row(pick(rng)) + 1e-3 * extent * r;
+    else Q.row(i) = m.V.row(pick(rng)) + 1e-9 * extent * r;
+  }
+  // rounding: relative to the extent, and to the coordinates (CGAL's arithmetic at 1e4 loses
+  // ~1e-13 absolute to cancellation)
+  const double tol = 1e-12 * extent + 1e-15 * m.V.cwiseAbs().maxCoeff();
+  const Eigen::VectorXd fast = point_mesh_distances(m.V, m.F, Q);
+  Eigen::VectorXi faces;
+  const Eigen::VectorXd cgal = MeshDistance(m.V, m.F).distances(Q, &faces);
+  for (Eigen::Index i = 0; i < Q.rows(); ++i) {
+    const Eigen::Vector3d p = Q.row(i).transpose();
+    const double ref = brute_force(m.V, m.F, p);
+    ASSERT_NEAR(fast(i), ref, tol) << "point_mesh_distances, query " << i;
+    ASSERT_NEAR(cgal(i), ref, tol) << "MeshDistance, query " << i;
+    const Eigen::Index f = faces(i);  // the face MeshDistance reports holds a closest point
+    const Eigen::Vector3d a = m.V.row(m.F(f, 0)).transpose(), b = m.V.row(m.F(f, 1)).transpose(), c = m.V.row(m.F(f, 2)).transpose();
+    EXPECT_NEAR((at(closest_point_barycentric(p, a, b, c), a, b, c) - p).norm(), ref, tol) << "query " << i;
+  }
+}
+}  // namespace
+
+TEST(PointMeshDistances, MatchBruteForceOnASphereAndABumpyGrid) {
+  TriMesh s = make_icosphere(4, 1.0);  // 5,120 faces
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0, 0.01);
+  for (Eigen::Index v = 0; v < s.V.rows(); ++v) s.V.row(v) *= 1 + n(rng);
+  expect_exact(s, Eigen::Vector3d::Zero(), 1.0, 11);
+  TriMesh g = make_grid(40, 30, 2.0, 1.5, 0.1, 5);
+  for (Eigen::Index v = 0; v < g.V.rows(); ++v) g.V(v, 2) = 0.1 * std::sin(5 * g.V(v, 0)) * std::cos(4 * g.V(v, 1));
+  expect_exact(g, Eigen::Vector3d(1, 0.75, 0), 2.0, 12);
+}
+
+TEST(PointMeshDistances, StayExactFarFromTheOrigin) {
+  // small triangles at 1e4, where a float step (~1e-3) is a tenth of a triangle
+  TriMesh s = make_icosphere(3, 0.01);
+  for (Eigen::Index v = 0; v < s.V.rows(); ++v) s.V.row(v) += Eigen::RowVector3d(1e4, -2e4, 3e3);
+  expect_exact(s, Eigen::Vector3d(1e4, -2e4, 3e3), 0.01, 13);
+}
+
+TEST(PointMeshDistances, DegenerateFacesNonFiniteQueriesAndBadInput) {
+  Eigen::MatrixX3d V(4, 3);
+  V << 0, 0, 0, 1, 0, 0, 2, 0, 0, 0, 1, 0;
+  Eigen::MatrixX3i F(2, 3);
+  F << 0, 1, 2,  // collinear: a segment
+      0, 1, 3;
+  Eigen::MatrixX3d Q(3, 3);
+  Q << 2.5, 0, 1, 0.2, 0.2, 1, std::numeric_limits<double>::infinity(), 0, 0;
+  const Eigen::VectorXd d = point_mesh_distances(V, F, Q);
+  EXPECT_NEAR(d(0), std::sqrt(0.25 + 1), 1e-15);
+  EXPECT_NEAR(d(1), 1.0, 1e-15);
+  EXPECT_TRUE(std::isnan(d(2)));
+  // bad meshes: the message names the face or the vertex
+  F(1, 2) = 4;
+  try {
+    point_mesh_distances(V, F, Q);
+    ADD_FAILURE() << "no error for an index out of range";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("face 1 refers to vertex 4"), std::string::npos) << e.what();
+  }
+  F(1, 2) = 3;
+  V(3, 1) = std::nan("");
+  try {
+    point_mesh_distances(V, F, Q);
+    ADD_FAILURE() << "no error for a NaN vertex";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("vertex 3 (of face 1) is not finite"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(point_mesh_distances(V, Eigen::MatrixX3i(0, 3), Q), InvalidInput);
 }

@@ -342,6 +342,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     throw InvalidInput(who + "the markers cannot pose the template: " + e.what());
   }
   rep.t_initial = since(t0);
+  logger()->trace("[TemplateFitting] initial: {:.3f} s: setMesh+laplacian {:.3f}, graph {:.3f}, factorize {:.3f}, rotations {:.3f}, solve {:.3f}",
+                  rep.t_initial, D.report().t_laplacian, D.report().t_graph, D.report().t_factorize, D.report().t_rotations, D.report().t_solve);
   t0 = Clock::now();
   double lambda = 1.0;
   if (u.estimate_scale) {
@@ -1243,13 +1245,12 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   report_progress(progress, 0.95, "metrics");
   t0 = Clock::now();
   {
-    const MeshDistance md(V, F);
     Eigen::MatrixX3d Q(rep.points_total, 3);
     Eigen::Index nq = 0;
     for (Eigen::Index i = 0; i < np; ++i)
       if (roi_ok[std::size_t(i)]) Q.row(nq++) = P.row(i);
     Q.conservativeResize(nq, 3);
-    const Eigen::VectorXd dist = md.distances(Q);
+    const Eigen::VectorXd dist = point_mesh_distances(V, F, Q);
     rep.hausdorff = dist.maxCoeff();
     rep.hausdorff_rel = rep.hausdorff / diag;
     rep.mean = dist.mean();

@@ -1,11 +1,16 @@
 #include "tbsp/mesh/point_mesh_distance.h"
 
+#include <embree3/rtcore.h>
+
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Simple_cartesian.h>
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
 #include <vector>
 
 #include "tbsp/core/error.h"
@@ -101,6 +106,135 @@ Eigen::VectorXd MeshDistance::distances(const Eigen::MatrixX3d& P, Eigen::Vector
     d(i) = (c - P.row(i).transpose()).norm();
     if (faces) (*faces)(i) = f;
   }
+  return d;
+}
+
+// ---- point_mesh_distances: Embree's BVH (single-precision boxes) + closest_point_barycentric
+
+namespace {
+
+// One Embree device for the process (creating one costs milliseconds; builds and queries on it
+// are thread-safe). Created on first use.
+RTCDevice shared_device() {
+  static RTCDevice device = [] {
+    RTCDevice d = rtcNewDevice(nullptr);
+    if (!d)
+      throw NumericalFailure("[tbsp::point_mesh_distances] Embree could not create a device (error " +
+                             std::to_string(int(rtcGetDeviceError(nullptr))) + ")");
+    return d;
+  }();
+  return device;
+}
+
+float round_down(double x) {
+  const float f = float(x);
+  return double(f) <= x ? f : std::nextafter(f, -std::numeric_limits<float>::infinity());
+}
+float round_up(double x) {
+  const float f = float(x);
+  return double(f) >= x ? f : std::nextafter(f, std::numeric_limits<float>::infinity());
+}
+
+struct Triangles {
+  const Eigen::MatrixX3d& V;
+  const Eigen::MatrixX3i& F;
+};
+
+struct Query {
+  const Triangles* mesh;
+  Eigen::Vector3d q;
+  double margin;  // added to the float query radius: Embree culls in single precision
+  double d = std::numeric_limits<double>::infinity();
+};
+
+void face_bounds(const RTCBoundsFunctionArguments* args) {
+  const auto* m = static_cast<const Triangles*>(args->geometryUserPtr);
+  const Eigen::Index f = Eigen::Index(args->primID);
+  Eigen::Vector3d lo = m->V.row(m->F(f, 0)).transpose(), hi = lo;
+  for (int k = 1; k < 3; ++k) {
+    lo = lo.cwiseMin(m->V.row(m->F(f, k)).transpose());
+    hi = hi.cwiseMax(m->V.row(m->F(f, k)).transpose());
+  }
+  // rounded outwards: the float box contains the double triangle
+  RTCBounds* b = args->bounds_o;
+  b->lower_x = round_down(lo.x());
+  b->lower_y = round_down(lo.y());
+  b->lower_z = round_down(lo.z());
+  b->upper_x = round_up(hi.x());
+  b->upper_y = round_up(hi.y());
+  b->upper_z = round_up(hi.z());
+}
+
+bool face_query(RTCPointQueryFunctionArguments* args) {
+  auto* r = static_cast<Query*>(args->userPtr);
+  const Triangles& m = *r->mesh;
+  const Eigen::Index f = Eigen::Index(args->primID);
+  const Eigen::Vector3d a = m.V.row(m.F(f, 0)).transpose(), b = m.V.row(m.F(f, 1)).transpose(),
+                        c = m.V.row(m.F(f, 2)).transpose();
+  const Eigen::Vector3d w = closest_point_barycentric(r->q, a, b, c);
+  const double d = (w(0) * a + w(1) * b + w(2) * c - r->q).norm();
+  if (!(d < r->d)) return false;
+  r->d = d;
+  args->query->radius = round_up(d + r->margin);  // shrink the search sphere
+  return true;
+}
+
+}  // namespace
+
+Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P) {
+  const std::string who = "[tbsp::point_mesh_distances] ";
+  if (F.rows() == 0) throw InvalidInput(who + "the mesh has no faces");
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int v = F(f, k);
+      if (v < 0 || v >= V.rows())
+        throw InvalidInput(who + "face " + std::to_string(f) + " refers to vertex " + std::to_string(v) + " but the mesh has " +
+                           std::to_string(V.rows()) + " vertices");
+      if (!V.row(v).allFinite())
+        throw InvalidInput(who + "vertex " + std::to_string(v) + " (of face " + std::to_string(f) + ") is not finite");
+    }
+  const Triangles mesh{V, F};
+  const double scale = V.cwiseAbs().maxCoeff();
+  RTCDevice device = shared_device();
+  RTCScene scene = rtcNewScene(device);
+  RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+  rtcSetGeometryUserPrimitiveCount(g, unsigned(F.rows()));
+  rtcSetGeometryUserData(g, const_cast<Triangles*>(&mesh));
+  rtcSetGeometryBoundsFunction(g, face_bounds, nullptr);
+  rtcCommitGeometry(g);
+  rtcAttachGeometry(scene, g);
+  rtcReleaseGeometry(g);
+  rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+  rtcCommitScene(scene);
+  const RTCError e = rtcGetDeviceError(device);
+  if (e != RTC_ERROR_NONE) {
+    rtcReleaseScene(scene);
+    throw NumericalFailure(who + "Embree could not build the tree of " + std::to_string(F.rows()) + " faces (error " +
+                           std::to_string(int(e)) + (e == RTC_ERROR_OUT_OF_MEMORY ? ": out of memory)" : ")"));
+  }
+  Eigen::VectorXd d(P.rows());
+#pragma omp parallel for schedule(dynamic, 256)
+  for (Eigen::Index i = 0; i < P.rows(); ++i) {
+    const Eigen::Vector3d q = P.row(i).transpose();
+    if (!q.allFinite()) {
+      d(i) = std::numeric_limits<double>::quiet_NaN();
+      continue;
+    }
+    // a float step of the coordinates is ~6e-8 of their size: 1e-6 of it keeps the culling
+    // conservative (no face that could be closest is skipped)
+    Query r{&mesh, q, 1e-6 * std::max(scale, q.cwiseAbs().maxCoeff())};
+    RTCPointQuery pq;
+    pq.x = float(q.x());
+    pq.y = float(q.y());
+    pq.z = float(q.z());
+    pq.time = 0.f;
+    pq.radius = std::numeric_limits<float>::infinity();
+    RTCPointQueryContext context;
+    rtcInitPointQueryContext(&context);
+    rtcPointQuery(scene, &pq, &context, face_query, &r);
+    d(i) = r.d;
+  }
+  rtcReleaseScene(scene);
   return d;
 }
 

@@ -1,6 +1,7 @@
 #pragma once
 /// \file point_mesh_distance.h
-/// \brief Exact point-to-triangle-mesh distances with CGAL's AABB tree (closest point, face).
+/// \brief Exact point-to-triangle-mesh distances: CGAL's AABB tree (closest point and face), and
+/// Embree's BVH for distances alone (point_mesh_distances, ~3x faster).
 
 #include <Eigen/Core>
 #include <memory>
@@ -16,6 +17,9 @@ Eigen::Vector3d closest_point_barycentric(const Eigen::Vector3d& p, const Eigen:
                                           const Eigen::Vector3d& c);
 
 /// \brief AABB tree over a triangle mesh; closest-point queries are exact and thread-safe.
+/// Where several faces are equally close (a closest point on a shared edge or vertex) the face
+/// returned is the one CGAL's traversal meets first. For distances alone point_mesh_distances is
+/// faster.
 class MeshDistance {
 public:
   MeshDistance(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F);
@@ -29,5 +33,16 @@ private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// \brief Unsigned distance of every row of P to the triangle mesh (V, F), in P's units; NaN for a
+/// non-finite row. Exact (each candidate face is measured in double precision with
+/// closest_point_barycentric); Embree's BVH (single-precision boxes rounded outwards, query
+/// radius padded by 1e-6 of the largest coordinate) only picks the candidates. Builds the tree
+/// (~0.04 s for 86k faces), queries in parallel (OpenMP; ~1 µs per point near the surface),
+/// frees it. Agrees with MeshDistance::distances to ~1e-15 at about a third of its time (the
+/// fitter's report on 100k points: 0.39 -> 0.15 s). No face index: use MeshDistance for that.
+/// \throws InvalidInput for no faces, a face index out of range or a non-finite vertex (the
+/// message names the face / vertex); NumericalFailure if Embree cannot build the tree.
+Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P);
 
 }  // namespace tbsp
