@@ -68,6 +68,8 @@ struct Ctx {
     throw FileError(path + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " + msg);
   }
   YAML::Node need(const YAML::Node& parent, const std::string& key, const std::string& where) const {
+    if (!parent.IsMap())
+      fail(parent, where + " must be a mapping with the key '" + key + "' (e.g. frames: {first: 0, last: 9})");
     YAML::Node n = parent[key];
     if (!n) fail(parent, where + ": the key '" + key + "' is missing");
     return n;
@@ -118,11 +120,27 @@ struct Ctx {
 
 }  // namespace
 
+namespace {
+Studio read_studio_file(const std::string& path);
+}
+
 Studio read_studio(const std::string& path) {
+  try {
+    return read_studio_file(path);
+  } catch (const YAML::Exception& e) {
+    // safety net: a node of an unexpected kind that no check above names
+    const int line = e.mark.line >= 0 ? e.mark.line + 1 : 0;
+    throw FileError(path + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": unexpected YAML structure (" + e.msg +
+                    "); see docs/studio_format.md");
+  }
+}
+
+namespace {
+Studio read_studio_file(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw FileError("'" + path + "': no such file; check the path");
   if (fs::is_directory(path, ec)) {
-    if (fs::exists(fs::path(path) / "studio.yaml")) return read_studio((fs::path(path) / "studio.yaml").string());
+    if (fs::exists(fs::path(path) / "studio.yaml")) return read_studio_file((fs::path(path) / "studio.yaml").string());
     throw FileError("'" + path + "': is a directory without studio.yaml");
   }
   YAML::Node root;
@@ -207,11 +225,13 @@ Studio read_studio(const std::string& path) {
   static const std::set<std::string> known = {"tbsp_studio", "name", "frame_rate", "frames", "cameras",
                                               "template", "markers", "skeleton", "ground_truth"};
   for (const auto& kv : root) {
-    const std::string key = kv.first.as<std::string>();
+    if (!kv.first.IsScalar()) c.fail(kv.first, "keys must be plain names");
+    const std::string key = kv.first.Scalar();
     if (!known.count(key)) c.fail(kv.first, "unknown key '" + key + "' (known: tbsp_studio, name, frame_rate, frames, cameras, template, markers, skeleton, ground_truth)");
   }
   return s;
 }
+}  // namespace
 
 void write_studio(const std::string& path, const Studio& s) {
   YAML::Emitter e;

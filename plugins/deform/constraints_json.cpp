@@ -88,7 +88,7 @@ int index(const nlohmann::json& j, const Ctx& c, const std::string& where, Eigen
 
 }  // namespace
 
-DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh, const std::string& source) {
+DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh, const std::string& source) try {
   const Ctx c{source};
   DeformJob job;
   if (!doc.is_object()) c.fail("top level", "expected an object with a \"constraints\" array");
@@ -124,6 +124,8 @@ DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh,
         c.fail(w + "." + it.key(), "unknown key");
     }
     DeformConstraint d;
+    if (j.contains("type") && !j["type"].is_string())
+      c.fail(w + ".type", "expected a string: \"position\", \"line\" or \"plane\"");
     const std::string type = j.value("type", std::string("position"));
     if (type == "position") d.type = ConstraintType::Position;
     else if (type == "line") d.type = ConstraintType::Line;
@@ -186,6 +188,8 @@ DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh,
     job.constraints.push_back(d);
   }
   return job;
+} catch (const nlohmann::json::exception& e) {
+  throw_json_structure_error(source, e);
 }
 
 DeformJob load_constraints_json(const std::string& path, const TriMesh& mesh) {

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "tbsp/core/error.h"
+#include "tbsp/plugins/json_file.h"
 
 namespace tbsp {
 
@@ -87,7 +88,7 @@ bool TetRegion::contains(const Eigen::Vector3d& p) const {
   return false;
 }
 
-void parse_tet_handles(const json& doc, Eigen::Index n, const std::string& source, TetJob& job) {
+void parse_tet_handles(const json& doc, Eigen::Index n, const std::string& source, TetJob& job) try {
   if (!doc.is_object()) fail(source, "top level", "expected an object with a \"handles\" array");
   check_keys(doc, {"handles", "iterations", "rotation_interpolation", "max_step_degrees", "comment"}, source, "top level");
   if (!doc.contains("handles") || !doc["handles"].is_array())
@@ -149,9 +150,11 @@ void parse_tet_handles(const json& doc, Eigen::Index n, const std::string& sourc
     if (!(v > 0 && v < 180)) fail(source, "max_step_degrees", "must be in (0, 180)");
     job.max_step_degrees = v;
   }
+} catch (const nlohmann::json::exception& e) {
+  throw_json_structure_error(source, e);
 }
 
-void parse_tet_rigid(const json& doc, Eigen::Index n, const std::string& source, TetJob& job) {
+void parse_tet_rigid(const json& doc, Eigen::Index n, const std::string& source, TetJob& job) try {
   if (!doc.is_object() || !doc.contains("rigid") || !doc["rigid"].is_array())
     fail(source, "top level", "expected {\"rigid\": [region, ...]} (docs/tetdeform_json.md)");
   const json& rs = doc["rigid"];
@@ -163,9 +166,11 @@ void parse_tet_rigid(const json& doc, Eigen::Index n, const std::string& source,
     if (!parse_region(rs[i], n, source, w, r)) fail(source, w, "needs \"vertices\", \"sphere\" or \"box\"");
     job.rigid.push_back(r);
   }
+} catch (const nlohmann::json::exception& e) {
+  throw_json_structure_error(source, e);
 }
 
-void parse_tet_stiffness(const json& doc, Eigen::Index n, const std::string& source, TetJob& job) {
+void parse_tet_stiffness(const json& doc, Eigen::Index n, const std::string& source, TetJob& job) try {
   if (!doc.is_object()) fail(source, "top level", "expected {\"default\": s, \"regions\": [...]}");
   check_keys(doc, {"default", "regions", "comment"}, source, "top level");
   if (doc.contains("default")) {
@@ -187,6 +192,8 @@ void parse_tet_stiffness(const json& doc, Eigen::Index n, const std::string& sou
       job.stiffness.push_back({r, s});
     }
   }
+} catch (const nlohmann::json::exception& e) {
+  throw_json_structure_error(source, e);
 }
 
 std::vector<int> resolve_region_vertices(const TetRegion& r, const Eigen::MatrixX3d& V, const std::vector<Eigen::Index>& to_input,

@@ -32,7 +32,7 @@ long long integer(const nlohmann::json& j, const std::string& path, const std::s
 }
 }  // namespace
 
-std::vector<FitMarker> load_markers_json(const std::string& path) {
+std::vector<FitMarker> load_markers_json(const std::string& path) try {
   const nlohmann::json doc = load(path);
   if (!doc.contains("markers") || !doc["markers"].is_array()) fail(path, "markers", "missing: expected an array");
   std::vector<FitMarker> out;
@@ -67,9 +67,11 @@ std::vector<FitMarker> load_markers_json(const std::string& path) {
     out.push_back(m);
   }
   return out;
+} catch (const nlohmann::json::exception& e) {
+  throw_json_structure_error(path, e);
 }
 
-RegionOfInterest load_roi_json(const std::string& path) {
+RegionOfInterest load_roi_json(const std::string& path) try {
   const nlohmann::json doc = load(path);
   RegionOfInterest roi;
   auto spheres = [&](const char* key, std::vector<Sphere>& out) {
@@ -111,6 +113,8 @@ RegionOfInterest load_roi_json(const std::string& path) {
   boxes("exclude_template_boxes", roi.exclude_template_boxes);
   boxes("exclude_cloud_boxes", roi.exclude_cloud_boxes);
   return roi;
+} catch (const nlohmann::json::exception& e) {
+  throw_json_structure_error(path, e);
 }
 
 const char* to_string(VertexStatus s) {

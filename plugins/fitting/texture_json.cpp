@@ -3,10 +3,11 @@
 #include <cmath>
 
 #include "tbsp/core/error.h"
+#include "tbsp/plugins/json_file.h"
 
 namespace tbsp {
 
-std::vector<TextureConstraint> parse_texture_constraints(const nlohmann::json& j, const std::string& path) {
+std::vector<TextureConstraint> parse_texture_constraints(const nlohmann::json& j, const std::string& path) try {
   const std::string where = "'" + path + "'";
   if (!j.is_object() || !j.contains("constraints") || !j["constraints"].is_array())
     throw FileError(where + ": expected an object with a \"constraints\" array, e.g. {\"constraints\": [{\"pixel\": [10, 20], \"vertex\": 5}]}");
@@ -40,6 +41,8 @@ std::vector<TextureConstraint> parse_texture_constraints(const nlohmann::json& j
     out.push_back(t);
   }
   return out;
+} catch (const nlohmann::json::exception& e) {
+  throw_json_structure_error(path, e);
 }
 
 }  // namespace tbsp

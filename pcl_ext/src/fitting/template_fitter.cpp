@@ -231,13 +231,14 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   for (Eigen::Index i = 0; i < np; ++i)
     if (inside(P.row(i).transpose(), roi.exclude_cloud_spheres, roi.exclude_cloud_boxes)) roi_ok[std::size_t(i)] = 0;
   rep.points_excluded = np - std::count(roi_ok.begin(), roi_ok.end(), 1);
-  {
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
-    for (Eigen::Index i = 0; i < np; ++i)
-      if (roi_ok[std::size_t(i)]) { lo = lo.cwiseMin(P.row(i).transpose()); hi = hi.cwiseMax(P.row(i).transpose()); }
-    if (rep.points_excluded == np) throw InvalidInput(who + "the region of interest excludes every cloud point");
-    rep.bbox_diagonal = (hi - lo).norm();
-  }
+  Eigen::Vector3d cloud_lo = Eigen::Vector3d::Constant(1e300), cloud_hi = -cloud_lo;
+  for (Eigen::Index i = 0; i < np; ++i)
+    if (roi_ok[std::size_t(i)]) {
+      cloud_lo = cloud_lo.cwiseMin(P.row(i).transpose());
+      cloud_hi = cloud_hi.cwiseMax(P.row(i).transpose());
+    }
+  if (rep.points_excluded == np) throw InvalidInput(who + "the region of interest excludes every cloud point");
+  rep.bbox_diagonal = (cloud_hi - cloud_lo).norm();
   const double diag = rep.bbox_diagonal;
   if (!(diag > 0)) throw InvalidInput(who + "the cloud's points all coincide; nothing to fit");
   auto t0 = Clock::now();
@@ -293,6 +294,15 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       if (!m.position.allFinite())
         throw InvalidInput(w + "needs a cloud_index or a finite free position");
       t = m.position;
+      // a free marker far outside the data poses the template away from it (and blows up the
+      // global scale): legal, but almost always a unit or typing mistake
+      const double out = (t - t.cwiseMax(cloud_lo).cwiseMin(cloud_hi)).norm();
+      if (out > rep.bbox_diagonal) {
+        const std::string msg = "marker " + std::to_string(k) + "'s free position lies " + std::to_string(out / rep.bbox_diagonal) +
+                                " cloud diagonals outside the cloud's bounding box (check its units). ";
+        rep.message += msg;
+        logger()->warn("[TemplateFitting] {}", msg);
+      }
     }
     mtarget.push_back(t);
     mverts.push_back(m.template_vertex);
@@ -307,6 +317,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   }
   for (Eigen::Index v = 0; v < nv0; ++v)
     if (inside(templ.V.row(v).transpose(), roi.exclude_template_spheres, roi.exclude_template_boxes)) masked[std::size_t(v)] = 1;
+  if (nv0 > 0 && std::all_of(masked.begin(), masked.end(), [](char c) { return c != 0; }))
+    throw InvalidInput(who + "the region of interest excludes every template vertex: nothing would be fitted to the data; "
+                             "shrink the template exclusions (exclude_template_*)");
 
   // ---- stage 1: initial deformation + global scale
   report_progress(progress, 0.05, "initial deformation");
@@ -435,7 +448,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   std::vector<int> prop_ids;        // per vertex: id of its propagated constraint (-1: none)
   std::vector<int> prop_sources;    // the matched vertices the interpolation starts from
   Eigen::MatrixX3d N0;              // normals of the initial deformation
-  bool propagate_in_loop = false;
+  bool propagate_in_loop = false;   // propagated constraints are in the frozen system (N0 set up)
+  bool propagation_handled = false; // propagation decided in the loop (done or skipped for good)
   // normal displacements of the matched vertices relative to the initial deformation,
   // harmonically interpolated, as targets of the unmatched ones (§5.3 end)
   auto propagated_targets = [&](const Eigen::MatrixX3d& X) {
@@ -652,6 +666,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
           else if (!masked[std::size_t(j)]) any_unmatched = true;
         }
         prop_ids.assign(std::size_t(V.rows()), -1);
+        propagate_in_loop = false;
         if (!prop_sources.empty() && any_unmatched) {
           try {
             N0 = vertex_normals(V0, F);
@@ -661,11 +676,14 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
               if (!matched[std::size_t(j)] && !masked[std::size_t(j)])
                 prop_ids[std::size_t(j)] = D.addPositionConstraint(SurfacePoint::atVertex(int(j)), T.row(j).transpose(),
                                                                    u.propagation_weight);
+            propagate_in_loop = true;
           } catch (const InvalidInput&) {
+            prop_ids.assign(std::size_t(V.rows()), -1);
             rep.message += "displacement propagation skipped (a mesh component has no matched vertex). ";
           }
         }
-        propagate_in_loop = true;  // done here (or skipped for good), not again in stage 3
+        // done here (or nothing to propagate: every unmasked vertex matched), not again in stage 3
+        propagation_handled = true;
         rep.t_propagation += since(tp);
       }
     }
@@ -822,7 +840,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     if (masked[std::size_t(j)]) status[std::size_t(j)] = VertexStatus::Masked;
     else if (matched[std::size_t(j)]) status[std::size_t(j)] = VertexStatus::Matched;
   }
-  if (propagate_in_loop) {
+  if (propagation_handled) {
     for (Eigen::Index j = 0; j < V.rows(); ++j)
       if (j < Eigen::Index(prop_ids.size()) && prop_ids[std::size_t(j)] >= 0) status[std::size_t(j)] = VertexStatus::Propagated;
   } else if (u.propagate_displacements && u.max_iterations > 0) {

@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "tbsp/core/error.h"
@@ -19,17 +20,78 @@ double robust_cot(const Eigen::Vector3d& u, const Eigen::Vector3d& v) {
   return std::clamp(u.dot(v) / s, -kMaxCotangent, kMaxCotangent);
 }
 
+// Relative margin of the intrinsic mollification (Sharp & Crane 2020, "A Laplacian for
+// nonmanifold triangle meshes", §4.5): a face whose triangle inequality holds with less than
+// kMollifyMargin x the mean edge length gets that margin by lengthening its three edges by
+// the same amount, and its cotangents and area come from those lengths. The three corner
+// cotangents then belong to one real triangle (cot a cot b + cot b cot c + cot c cot a = 1), so
+// the face's stiffness block stays positive semi-definite. Clamping each corner on its own does
+// not (a zero-area face gives cots near (+1e4, +1e4, -1e4): an indefinite block, and a solver
+// that stops with "not positive definite"). Faces above the margin are computed as before.
+constexpr double kMollifyMargin = 1e-4;
+
+double mean_edge_length(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
+  double sum = 0;
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) sum += (V.row(F(f, k)) - V.row(F(f, (k + 1) % 3))).norm();
+  return F.rows() ? sum / double(3 * F.rows()) : 0.0;
+}
+
+// Geometry of a face for the Laplacian: corner cotangents, area and squared edge lengths
+// (l2[k]: the edge opposite corner k). `delta`: the mollification margin in model units.
+struct FaceGeometry {
+  double cot[3];
+  double area;
+  double l2[3];
+  bool mollified;
+};
+
+FaceGeometry face_geometry(const Eigen::Vector3d p[3], double delta) {
+  FaceGeometry g;
+  double l[3];
+  for (int k = 0; k < 3; ++k) {
+    g.l2[k] = (p[(k + 2) % 3] - p[(k + 1) % 3]).squaredNorm();
+    l[k] = std::sqrt(g.l2[k]);
+  }
+  double margin = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 3; ++k) margin = std::min(margin, l[(k + 1) % 3] + l[(k + 2) % 3] - l[k]);
+  g.mollified = delta > 0 && margin < delta;
+  if (!g.mollified) {
+    for (int k = 0; k < 3; ++k) g.cot[k] = robust_cot(p[(k + 1) % 3] - p[k], p[(k + 2) % 3] - p[k]);
+    g.area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).norm();
+    return g;
+  }
+  const double eps = delta - margin;
+  for (int k = 0; k < 3; ++k) {
+    l[k] += eps;
+    g.l2[k] = l[k] * l[k];
+  }
+  // Heron's formula in Kahan's stable form (a >= b >= c)
+  double s[3] = {l[0], l[1], l[2]};
+  std::sort(s, s + 3, [](double x, double y) { return x > y; });
+  const double a = s[0], b = s[1], c = s[2];
+  const double q = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c));
+  g.area = 0.25 * std::sqrt(std::max(q, 0.0));
+  for (int k = 0; k < 3; ++k) {
+    const double num = g.l2[(k + 1) % 3] + g.l2[(k + 2) % 3] - g.l2[k];
+    g.cot[k] = g.area > 0 ? std::clamp(num / (4 * g.area), -kMaxCotangent, kMaxCotangent) : 0.0;
+  }
+  return g;
+}
+
 }  // namespace
 
 Eigen::SparseMatrix<double> cotangent_matrix(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
+  const double delta = kMollifyMargin * mean_edge_length(V, F);
   std::vector<Eigen::Triplet<double>> t;
   t.reserve(std::size_t(F.rows()) * 12);
   for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    const Eigen::Vector3d p[3] = {V.row(F(f, 0)), V.row(F(f, 1)), V.row(F(f, 2))};
+    const FaceGeometry g = face_geometry(p, delta);
     for (int k = 0; k < 3; ++k) {
-      const int i = F(f, k), j = F(f, (k + 1) % 3), o = F(f, (k + 2) % 3);
+      const int i = F(f, k), j = F(f, (k + 1) % 3);
       if (i == j) continue;
-      const Eigen::Vector3d po = V.row(o);
-      const double w = 0.5 * robust_cot(Eigen::Vector3d(V.row(i)) - po, Eigen::Vector3d(V.row(j)) - po);
+      const double w = 0.5 * g.cot[(k + 2) % 3];  // the angle at the corner opposite edge ij
       t.emplace_back(i, j, w);
       t.emplace_back(j, i, w);
       t.emplace_back(i, i, -w);
@@ -42,16 +104,20 @@ Eigen::SparseMatrix<double> cotangent_matrix(const Eigen::MatrixX3d& V, const Ei
 }
 
 Eigen::VectorXd voronoi_areas(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
+  const double delta = kMollifyMargin * mean_edge_length(V, F);
   Eigen::VectorXd A = Eigen::VectorXd::Zero(V.rows());
   for (Eigen::Index f = 0; f < F.rows(); ++f) {
     const int idx[3] = {F(f, 0), F(f, 1), F(f, 2)};
     const Eigen::Vector3d p[3] = {V.row(idx[0]), V.row(idx[1]), V.row(idx[2])};
-    const double area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).norm();
+    const FaceGeometry g = face_geometry(p, delta);
+    const double area = g.area;
     if (!(area > 0)) continue;
-    // dot products at each corner: negative = obtuse
-    double d[3];
-    for (int k = 0; k < 3; ++k) d[k] = (p[(k + 1) % 3] - p[k]).dot(p[(k + 2) % 3] - p[k]);
-    const int obtuse = d[0] < 0 ? 0 : d[1] < 0 ? 1 : d[2] < 0 ? 2 : -1;
+    // obtuse corner: its opposite edge is longer than the other two together (squared)
+    int obtuse = -1;
+    for (int k = 0; k < 3 && obtuse < 0; ++k)
+      if (g.mollified ? g.l2[k] > g.l2[(k + 1) % 3] + g.l2[(k + 2) % 3]
+                      : (p[(k + 1) % 3] - p[k]).dot(p[(k + 2) % 3] - p[k]) < 0)
+        obtuse = k;
     for (int k = 0; k < 3; ++k) {
       if (obtuse >= 0) {
         A(idx[k]) += (k == obtuse) ? area / 2 : area / 4;
@@ -59,9 +125,7 @@ Eigen::VectorXd voronoi_areas(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i&
       }
       const int j = (k + 1) % 3, l = (k + 2) % 3;
       // Voronoi part: 1/8 (|e_kl|^2 cot(angle at j) + |e_kj|^2 cot(angle at l))
-      const double cot_j = robust_cot(p[k] - p[j], p[l] - p[j]);
-      const double cot_l = robust_cot(p[k] - p[l], p[j] - p[l]);
-      A(idx[k]) += 0.125 * ((p[l] - p[k]).squaredNorm() * cot_j + (p[j] - p[k]).squaredNorm() * cot_l);
+      A(idx[k]) += 0.125 * (g.l2[j] * g.cot[j] + g.l2[l] * g.cot[l]);
     }
   }
   return A;

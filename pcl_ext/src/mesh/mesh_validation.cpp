@@ -170,6 +170,9 @@ MeshReport require_valid_mesh(const TriMesh& mesh, const MeshRequirements& req, 
   if (!req.allow_nonmanifold && !r.nonmanifold_edges.empty())
     fail("non-manifold edges (shared by more than two faces): " + first_edges(r.nonmanifold_edges) +
          "; split them or remove the extra faces (`tbsp validate` lists all)");
+  if (r.degenerate_faces.size() == std::size_t(r.num_faces))
+    fail("every face has zero area (the vertices coincide or lie on one line): there is no surface to process; check "
+         "the vertex coordinates (units, a failed export)");
   if (!req.allow_degenerate && !r.degenerate_faces.empty())
     fail("degenerate faces (zero area): " + first_items(r.degenerate_faces) + "; remove them or collapse their short edge");
   if (!req.allow_duplicate_faces && !r.duplicate_faces.empty())

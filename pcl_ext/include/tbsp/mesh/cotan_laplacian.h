@@ -7,10 +7,15 @@
 /// (eq. 3.1). With cotangent weights δ_i ≈ −H_i n_i where H_i = κ1 + κ2 (twice the mean
 /// curvature) and n_i the outward normal: on a sphere of radius r, δ_i ≈ −(2/r) n_i.
 ///
-/// Robustness: cotangents are computed as cos/sin with sin floored at 1e-12 · |a||b| and
-/// clamped to ±kMaxCotangent, mixed Voronoi areas are floored at 1e-8 × the mean vertex area,
-/// and a row without any usable weight (all incident triangles degenerate) falls back to the
-/// uniform row, so obtuse, needle and zero-area triangles never produce Inf/NaN or empty rows.
+/// Robustness: a face whose triangle inequality holds with a margin below 1e-4 × the mean edge
+/// length (zero-area, collinear or coincident corners) is *intrinsically mollified* (Sharp &
+/// Crane 2020): its three edge lengths grow by the same amount until the margin is reached, and
+/// its cotangents and area come from those lengths (Heron). Its three cotangents thus belong to
+/// one real triangle and its stiffness block stays positive semi-definite, so a zero-area face
+/// does not make the deformation and interpolation systems indefinite. Other faces: cos/sin with
+/// sin floored at 1e-12 · |a||b|, clamped to ±kMaxCotangent. Mixed Voronoi areas are floored at
+/// 1e-8 × the mean vertex area, and a row without any usable weight falls back to the uniform
+/// row, so obtuse, needle and zero-area triangles never produce Inf/NaN or empty rows.
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
