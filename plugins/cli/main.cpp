@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "capture_cmds.h"
+#include "mocap_cmds.h"
 #include "tet_cmds.h"
 #include "texture_cmds.h"
 #include "progress_bar.h"
@@ -506,6 +507,9 @@ int main(int argc, char** argv) {
   tbsp::cli::TextureArgs txa;
   CLI::App* texture = nullptr;
   tbsp::cli::add_texture(app, txa, texture);
+  tbsp::cli::MocapArgs ma;
+  CLI::App* mocap = nullptr;
+  tbsp::cli::add_mocap(app, ma, mocap);
 
   std::string demo_in = TBSP_SAMPLE_DATA_DIR, demo_out = "tbsp_demo_out";
   bool demo_quiet = false;
@@ -563,6 +567,7 @@ int main(int argc, char** argv) {
     if (*replay) return tbsp::cli::cmd_replay(ra);
     if (*tetdeform) return tbsp::cli::cmd_tetdeform(tda);
     if (*texture) return tbsp::cli::cmd_texture(txa);
+    if (*mocap) return tbsp::cli::cmd_mocap(ma);
   } catch (const tbsp::Cancelled& e) {
     std::cerr << "tbsp " << sub << ": cancelled: " << e.what() << "\n";
     return 130;

@@ -43,6 +43,13 @@ void write_trc(const std::string& path, const MarkerTrajectories& markers);
 /// `allow_truncated`: then the complete frames present are returned and a warning is logged.
 MarkerTrajectories read_c3d(const std::string& path, bool allow_truncated = false);
 
+/// Writes C3D (Intel processor type, float point data, written atomically) that read_c3d and
+/// other C3D tools read back: POINT:USED/SCALE/RATE/DATA_START/FRAMES/UNITS/LABELS(2..) and an
+/// empty ANALOG group. Gaps (NaN) are written with residual -1. Frame numbers start at
+/// max(1, first_frame). Throws InvalidInput when the data do not fit C3D: no markers or frames,
+/// more than 65535 frames or markers, names over 255 characters, |coordinate| > 3e38.
+void write_c3d(const std::string& path, const MarkerTrajectories& markers);
+
 /// One BVH joint (End Sites are joints with no channels and end_site = true).
 struct BvhJoint {
   enum Channel { Xposition, Yposition, Zposition, Xrotation, Yrotation, Zrotation };
