@@ -646,9 +646,11 @@ double TetDeformer::iterate() {
 
   // (II) rotation extraction
   t0 = Clock::now();
-  double energy = 0, arap = 0;
   Xrow_ = X_;  // row-major copy: the four corners of a tet are 4 contiguous triples
-#pragma omp parallel for reduction(+ : energy, arap) schedule(static) if (m > 2000)
+  // per-tet terms, summed in tet order below: the energies (and the convergence test on them)
+  // do not depend on the number of threads
+  tet_e2_.resize(m);
+#pragma omp parallel for schedule(static) if (m > 2000)
   for (Eigen::Index j = 0; j < m; ++j) {
     const Eigen::Map<const Mat34> Gj(G_.row(j).data());
     Eigen::Matrix<double, 4, 3> Xj;
@@ -657,9 +659,12 @@ double TetDeformer::iterate() {
     const Eigen::Matrix3d R = polar_rotation(F, R_[std::size_t(j)]);
     R_[std::size_t(j)] = R;
     // S = Rᵀ F; ‖F − R‖ = ‖S − I‖ for orthogonal R
-    const double e2 = (R.transpose() * F - Eigen::Matrix3d::Identity()).squaredNorm();
-    energy += std::sqrt(e2);
-    arap += weight_(j) * e2;
+    tet_e2_(j) = (R.transpose() * F - Eigen::Matrix3d::Identity()).squaredNorm();
+  }
+  double energy = 0, arap = 0;
+  for (Eigen::Index j = 0; j < m; ++j) {
+    energy += std::sqrt(tet_e2_(j));
+    arap += weight_(j) * tet_e2_(j);
   }
   report_.t_rotext += seconds_since(t0);
 

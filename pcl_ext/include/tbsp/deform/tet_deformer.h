@@ -224,6 +224,7 @@ private:
   // state
   Eigen::MatrixX3d X_;
   Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> Xrow_;
+  Eigen::VectorXd tet_e2_;  // per-tet squared ARAP residual of the last rotation extraction
   std::vector<Eigen::Matrix3d> R_;
   int ramp_iteration_ = 0, ramp_steps_ = 1;
   TetDeformReport report_;
