@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cstdint>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -94,7 +95,33 @@ void prevalidate_pcd(const std::string& path) {
     if (sz[0] > remaining - 8) fail("compressed block of " + std::to_string(sz[0]) + " bytes exceeds the file (truncated)");
     if (std::uint64_t(sz[1]) != std::uint64_t(points) * point_size)
       fail("decompressed size " + std::to_string(sz[1]) + " does not match POINTS x point size");
-  } else if (data != "ascii") {
+  } else if (data == "ascii") {
+    // PCL's reader goes on parsing header keywords in the body (a line "COLUMNS..." after DATA
+    // empties its field list, and the body then writes out of bounds: a fuzz finding), so the
+    // body is checked here first: one line per point, as many numbers as FIELDS x COUNT
+    std::uint64_t per_line = 0;
+    for (long long c : counts) per_line += std::uint64_t(c);
+    long long rows = 0;
+    while (std::getline(in, line)) {
+      ++lineno;
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      if (line.find_first_not_of(" \t") == std::string::npos) continue;
+      if (rows == points)
+        fail("more data lines than the " + std::to_string(points) + " POINTS the header declares");
+      std::istringstream ls(line);
+      std::uint64_t n = 0;
+      for (std::string tok; ls >> tok; ++n) {
+        char* end = nullptr;
+        std::strtod(tok.c_str(), &end);
+        if (end == tok.c_str() || *end != '\0') fail("'" + tok.substr(0, 30) + "' is not a number (point " + std::to_string(rows) + ")");
+      }
+      if (n != per_line)
+        fail("point " + std::to_string(rows) + " has " + std::to_string(n) + " values; FIELDS x COUNT need " + std::to_string(per_line));
+      ++rows;
+    }
+    if (rows < points)
+      fail("the data holds " + std::to_string(rows) + " of the " + std::to_string(points) + " POINTS the header declares (truncated?)");
+  } else {
     fail("unknown DATA encoding '" + data + "' (ascii, binary or binary_compressed)");
   }
 }

@@ -112,3 +112,32 @@ TEST(MalformedFiles, PcdErrors) {
   }
   std::filesystem::remove_all(dir);
 }
+
+// Fuzz finding (scripts/fuzz, target pcd): PCL 1.13 keeps parsing header keywords in an ASCII
+// body, so a data line starting with "COLUMNS" emptied its field list and the body was written
+// out of bounds (segfault). The body is validated first; each case names the line.
+TEST(MalformedFiles, PcdAsciiBodyIsValidatedBeforePcl) {
+  const auto dir = test::temp_dir("badpcd_ascii");
+  const std::string head = "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 3\nHEIGHT 1\n"
+                           "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA ascii\n";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"0 0 0\nCOLUMNS9Cloud \n1 1 1\n", ":13: 'COLUMNS9Cloud' is not a number"},
+      {"0 0 0\n1 1\n2 2 2\n", ":13: point 1 has 2 values; FIELDS x COUNT need 3"},
+      {"0 0 0\n1 1 1\n", "holds 2 of the 3 POINTS"},
+      {"0 0 0\n1 1 1\n2 2 2\n3 3 3\n", ":15: more data lines than the 3 POINTS"},
+  };
+  for (const auto& [body, expect] : cases) {
+    const std::string p = (dir / "a.pcd").string();
+    std::ofstream(p) << head << body;
+    try {
+      read_cloud(p);
+      FAIL() << body;
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
+  // a valid body with blank lines, nan and exponents still reads
+  std::ofstream(dir / "ok.pcd") << head << "0 0 0\n\n1e-3 nan 2\n-1 1.5E2 3\n";
+  EXPECT_EQ(read_cloud((dir / "ok.pcd").string()).width, 3u);
+  std::filesystem::remove_all(dir);
+}
