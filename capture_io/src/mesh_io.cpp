@@ -176,7 +176,15 @@ TriMesh read_ply(TextBuffer& buf) {
           scal[k] = ascii ? buf.readDouble(what + " property '" + p.name + "'") : buf.readBinary(p.type, be, what);
           continue;
         }
-        const long long cnt = ascii ? buf.readInt(what + " list count") : (long long)buf.readBinary(p.count_type, be, what);
+        long long cnt = 0;
+        if (ascii) {
+          cnt = buf.readInt(what + " list count");
+        } else {
+          const double c = buf.readBinary(p.count_type, be, what);
+          if (!(std::isfinite(c) && c == std::floor(c) && std::abs(c) < 9e18))
+            buf.failBinary(what + ": list count " + std::to_string(c) + " is not an integer (corrupt file)");
+          cnt = (long long)c;
+        }
         if (cnt < 0 || std::size_t(cnt) > buf.remaining())
           ascii ? buf.fail(what + ": list count " + std::to_string(cnt) + " is impossible (corrupt file)")
                 : buf.failBinary(what + ": list count " + std::to_string(cnt) + " is impossible (corrupt file)");
@@ -184,7 +192,13 @@ TriMesh read_ply(TextBuffer& buf) {
         if (keep) list.clear();
         for (long long j = 0; j < cnt; ++j) {
           double v = ascii ? buf.readDouble(what + " list entry") : buf.readBinary(p.type, be, what);
-          if (keep) list.push_back((long long)v);
+          if (keep) {
+            // a vertex index: an integer in range of long long (a cast of inf or 1e300 is UB)
+            if (!(std::isfinite(v) && v == std::floor(v) && std::abs(v) < 9e18))
+              ascii ? buf.fail(what + ": vertex index " + std::to_string(v) + " is not an integer (corrupt file)")
+                    : buf.failBinary(what + ": vertex index " + std::to_string(v) + " is not an integer (corrupt file)");
+            list.push_back((long long)v);
+          }
         }
       }
       if (is_vertex) {

@@ -278,10 +278,14 @@ MarkerTrajectories read_c3d(const std::string& path, bool allow_truncated) {
   auto param_number = [&](const std::string& key, double fallback) {
     const C3dParam* p = find(key);
     if (!p || p->count() < 1) return fallback;
-    if (p->type == 2) return static_cast<double>(r.i16(p->data_at, "parameter data"));
-    if (p->type == 4) return static_cast<double>(r.f32(p->data_at, "parameter data"));
-    if (p->type == 1) return static_cast<double>(r.u8(p->data_at, "parameter data"));
-    return fallback;
+    double v = fallback;
+    if (p->type == 2) v = static_cast<double>(r.i16(p->data_at, "parameter data"));
+    if (p->type == 4) v = static_cast<double>(r.f32(p->data_at, "parameter data"));
+    if (p->type == 1) v = static_cast<double>(r.u8(p->data_at, "parameter data"));
+    // the callers convert to int: a float parameter must be a finite number in int range
+    if (!std::isfinite(v) || std::abs(v) > 2e9)
+      r.fail(p->data_at, "parameter " + key + " = " + std::to_string(v) + " is out of range");
+    return v;
   };
   auto param_strings = [&](const std::string& key) {
     std::vector<std::string> out;

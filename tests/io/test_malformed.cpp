@@ -32,6 +32,10 @@ std::vector<Case> cases() {
       {"ply_nan", "a.ply", ply_header(3, 1) + "0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n", "non-finite"},
       {"ply_bad_index", "a.ply", ply_header(3, 1) + "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", "references vertex 7"},
       {"ply_negative_index", "a.ply", ply_header(3, 1) + "0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n", "references vertex -1"},
+      // fuzz findings (UBSan: inf cast to an integer index)
+      {"ply_inf_index", "a.ply", ply_header(3, 1) + "0 0 0\n1 0 0\n0 1 0\n3 0 inf 2\n", "is not an integer"},
+      {"ply_huge_index", "a.ply", ply_header(3, 1) + "0 0 0\n1 0 0\n0 1 0\n3 0 1e300 2\n", "is not an integer"},
+      {"ply_fractional_index", "a.ply", ply_header(3, 1) + "0 0 0\n1 0 0\n0 1 0\n3 0 1.5 2\n", "is not an integer"},
       {"ply_binary_truncated", "a.ply", bin_trunc, "truncated"},
       {"ply_garbage_number", "a.ply", ply_header(3, 1) + "0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n", "expected a number"},
       {"ply_unknown_format", "a.ply", "ply\nformat ebcdic 1.0\nend_header\n", "unknown PLY format"},
