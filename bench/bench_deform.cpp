@@ -3,7 +3,12 @@
 // the rotation field. Run: ./build/bench/bench_deform [--benchmark_filter=...]
 #include <benchmark/benchmark.h>
 
+#include <Eigen/Geometry>
+
+#include <chrono>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 
 #include "tbsp/deform/laplacian_deformer.h"
 #include "tbsp/io/mesh_io.h"
@@ -94,5 +99,60 @@ static void BM_RefactorizeSamePattern(benchmark::State& st) {
   st.counters["analyses"] = s.numAnalyses();
 }
 BENCHMARK(BM_RefactorizeSamePattern)->DenseRange(4, 6)->Unit(benchmark::kMillisecond);
+
+// The deformation survey's 40k-vertex `plane` (Botsch & Sorkine 2008; ../shared/data,
+// EmperorJack__ShapeDeformer): a fixed region (1,809 vertices) and a handle region (1,608)
+// moved by the .def transform, hard, with the rotation field: first deform() from scratch
+// (constraint graph + rotation field + factorization + solve). arg 1: each region one handle
+// group (one graph node each); arg 0: every constrained vertex its own node (before the
+// handle groups: 27.8 s here).
+static void BM_SurveyPlaneRotationField(benchmark::State& st) {
+  const std::string dir = std::string(TBSP_SHARED_DATA_DIR) + "/meshes/EmperorJack__ShapeDeformer/res/";
+  if (!std::filesystem::exists(dir + "plane.off")) {
+    st.SkipWithError("../shared/data missing");
+    return;
+  }
+  const TriMesh m = read_mesh(dir + "plane.off");
+  std::ifstream sel(dir + "plane.sel"), def(dir + "plane.def");
+  std::vector<int> status;
+  Eigen::Matrix4d M;
+  std::string line;
+  while (std::getline(sel, line))
+    if (!line.empty() && line[0] != '#') status.push_back(std::stoi(line));
+  int r = 0;
+  while (std::getline(def, line))
+    if (!line.empty() && line[0] != '#') {
+      std::istringstream is(line);
+      for (int c = 0; c < 4; ++c) is >> M(r, c);
+      ++r;
+    }
+  const bool grouped = st.range(0) == 1;
+  for (auto _ : st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    LaplacianDeformer d;
+    d.setMesh(m);
+    st.counters["setmesh_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    for (Eigen::Index v = 0; v < m.V.rows(); ++v) {
+      if (status[std::size_t(v)] == 1) continue;
+      DeformConstraint c;
+      c.at = SurfacePoint::atVertex(int(v));
+      c.hard = true;
+      c.group = grouped ? status[std::size_t(v)] : -1;
+      const Eigen::Matrix4d T = status[std::size_t(v)] == 2 ? M : Eigen::Matrix4d::Identity();
+      c.target = (T * m.V.row(v).transpose().homogeneous()).head<3>();
+      c.rotation = Eigen::Matrix3d(T.topLeftCorner<3, 3>());
+      d.addConstraint(c);
+    }
+    d.setUseRotationField(true);
+    benchmark::DoNotOptimize(d.deform());
+    st.counters["nodes"] = d.report().rotation_nodes;
+    st.counters["graph_s"] = d.report().t_graph;
+    st.counters["factorize_s"] = d.report().t_factorize;
+    st.counters["laplacian_s"] = d.report().t_laplacian;
+    st.counters["rotations_s"] = d.report().t_rotations;
+    st.counters["solve_s"] = d.report().t_solve;
+  }
+}
+BENCHMARK(BM_SurveyPlaneRotationField)->Arg(1)->Arg(0)->Iterations(1)->Unit(benchmark::kMillisecond);
 
 BENCHMARK_MAIN();

@@ -157,6 +157,7 @@ DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh,
       const bool rigid = (Rm.transpose() * Rm - Eigen::Matrix3d::Identity()).norm() < 1e-6 && Rm.determinant() > 0;
       for (std::size_t k = 0; k < vs.size(); ++k) {
         DeformConstraint e = d;
+        e.group = int(i);  // one handle: one node of the rotation field, whatever its size
         e.at = SurfacePoint::atVertex(index(vs[k], c, w + ".vertices[" + std::to_string(k) + "]", mesh.V.rows(), "vertex"));
         e.target = (M * mesh.V.row(e.at.vertex).transpose().homogeneous()).head<3>();
         if (!e.rotation && rigid) e.rotation = Rm;

@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <cstdio>
 #include <numeric>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -31,6 +32,9 @@ void render_panels_png(const std::string& path, const std::vector<RenderPanel>& 
   const Eigen::Matrix3d R = (Eigen::AngleAxisd(el, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(-az, Eigen::Vector3d::UnitY()))
                                 .toRotationMatrix();
   const Eigen::Vector3d light = Eigen::Vector3d(0.3, 0.5, 1.0).normalized();
+  const bool any_bar = std::any_of(panels.begin(), panels.end(), [](const RenderPanel& p) { return p.colorbar; });
+  const int title_h = 24, bar_h = any_bar ? 54 : 0;            // title strip on top, colour bar below
+  const int draw_h = o.panel_height - title_h - bar_h;          // the drawing area
   cv::Mat canvas(o.panel_height, o.panel_width * int(panels.size()), CV_8UC3, cv::Scalar(255, 255, 255));
   Eigen::Vector2d gmin(1e300, 1e300), gmax(-1e300, -1e300);
   std::vector<Eigen::MatrixX3d> P(panels.size());
@@ -50,18 +54,23 @@ void render_panels_png(const std::string& path, const std::vector<RenderPanel>& 
     const auto& m = panels[k].mesh;
     const auto& X = P[k];
     Eigen::Vector2d lo = gmin, hi = gmax;
-    if (!o.shared_frame && X.rows()) {
-      lo = X.leftCols<2>().colwise().minCoeff().transpose();
-      hi = X.leftCols<2>().colwise().maxCoeff().transpose();
+    if (!o.shared_frame && (X.rows() || Q[k].rows())) {
+      lo = Eigen::Vector2d::Constant(1e300);
+      hi = Eigen::Vector2d::Constant(-1e300);
+      for (const Eigen::MatrixX3d* Y : {static_cast<const Eigen::MatrixX3d*>(&X), static_cast<const Eigen::MatrixX3d*>(&Q[k])})
+        if (Y->rows()) {
+          lo = lo.cwiseMin(Y->leftCols<2>().colwise().minCoeff().transpose());
+          hi = hi.cwiseMax(Y->leftCols<2>().colwise().maxCoeff().transpose());
+        }
     }
     const double margin = 0.08;
     const double s = (1 - 2 * margin) * std::min(o.panel_width / std::max(hi.x() - lo.x(), 1e-300),
-                                                 (o.panel_height - 30) / std::max(hi.y() - lo.y(), 1e-300));
+                                                 draw_h / std::max(hi.y() - lo.y(), 1e-300));
     const Eigen::Vector2d c = 0.5 * (lo + hi);
     const int ox = int(k) * o.panel_width;
     auto px = [&](const Eigen::RowVector3d& p) {
       const double x = ox + o.panel_width / 2.0 + s * (p.x() - c.x());
-      const double y = 15 + (o.panel_height - 15) / 2.0 - s * (p.y() - c.y());
+      const double y = title_h + draw_h / 2.0 - s * (p.y() - c.y());
       return cv::Point(int(std::lround(x * 16)), int(std::lround(y * 16)));
     };
     std::vector<int> order(static_cast<std::size_t>(m.F.rows()));
@@ -97,7 +106,30 @@ void render_panels_png(const std::string& path, const std::vector<RenderPanel>& 
                    cv::FILLED, cv::LINE_AA, 4);
       }
     }
-    cv::putText(canvas, panels[k].title, cv::Point(ox + 8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+    cv::putText(canvas, panels[k].title, cv::Point(ox + 8, 17), cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+    if (panels[k].colorbar) {
+      // horizontal bar: colormap() from lo (left) to hi (right), with both values and the label
+      const int x0 = ox + 40, x1 = ox + o.panel_width - 40, y0 = o.panel_height - bar_h + 6, y1 = y0 + 12;
+      for (int x = x0; x <= x1; ++x) {
+        const Eigen::MatrixX3d col = colormap(Eigen::VectorXd::Constant(1, double(x - x0) / double(x1 - x0)), 0, 1);
+        cv::line(canvas, cv::Point(x, y0), cv::Point(x, y1), cv::Scalar(255 * col(0, 2), 255 * col(0, 1), 255 * col(0, 0)));
+      }
+      cv::rectangle(canvas, cv::Point(x0, y0), cv::Point(x1, y1), cv::Scalar(90, 90, 90));
+      auto num = [](double v) {
+        char b[32];
+        std::snprintf(b, sizeof b, "%.3g", v);
+        return std::string(b);
+      };
+      const auto font = cv::FONT_HERSHEY_SIMPLEX;
+      cv::putText(canvas, num(panels[k].colorbar_lo), cv::Point(x0 - 4, y1 + 14), font, 0.38, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+      const std::string hi_s = num(panels[k].colorbar_hi);
+      int base = 0;
+      const cv::Size hs = cv::getTextSize(hi_s, font, 0.38, 1, &base);
+      cv::putText(canvas, hi_s, cv::Point(x1 - hs.width + 4, y1 + 14), font, 0.38, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+      const cv::Size ls = cv::getTextSize(panels[k].colorbar_label, font, 0.38, 1, &base);
+      cv::putText(canvas, panels[k].colorbar_label, cv::Point(ox + (o.panel_width - ls.width) / 2, y1 + 28), font, 0.38,
+                  cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+    }
     if (k > 0) cv::line(canvas, cv::Point(ox, 0), cv::Point(ox, o.panel_height), cv::Scalar(180, 180, 180));
   }
   std::vector<uchar> png;

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include <opencv2/imgcodecs.hpp>
 #include "cli_util.h"
 #include "test_util.h"
 #include "tbsp/io/mesh_io.h"
@@ -196,5 +197,42 @@ TEST(Cli, DemoProducesOutputs) {
   std::ifstream(dir / "o" / "fit_report.json") >> f;
   EXPECT_NEAR(f["scale"].get<double>(), 1.5, 0.1);  // the sample scan is the bar scaled ×1.5
   EXPECT_LT(f["metrics"]["p99"].get<double>() / f["metrics"]["bbox_diagonal"].get<double>(), 0.2);
+  std::filesystem::remove_all(dir);
+}
+
+// Issue: `tbsp render` given a point cloud (a PLY with vertices only) drew an empty panel.
+TEST(Cli, RenderDrawsPointCloudsWithAColourBar) {
+  const auto dir = test::temp_dir("cli_render_cloud");
+  TriMesh cloud;
+  cloud.V = make_icosphere(3).V;  // 642 points, no faces
+  cloud.F.resize(0, 3);
+  const std::string in = (dir / "cloud.ply").string(), png = (dir / "c.png").string();
+  write_mesh(in, cloud);
+  std::ofstream sc(dir / "s.txt");
+  for (Eigen::Index i = 0; i < cloud.V.rows(); ++i) sc << cloud.V(i, 0) << "\n";
+  sc.close();
+  CliResult r = run("render " + in + " --scalar " + (dir / "s.txt").string() + " --out " + png, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const cv::Mat img = cv::imread(png);
+  ASSERT_FALSE(img.empty());
+  // the drawing area (below the title, above the colour bar) holds coloured dots: red and blue
+  // ends of the scalar both appear
+  const cv::Mat area = img(cv::Rect(0, 30, img.cols, img.rows - 90));
+  int red = 0, blue = 0, ink = 0;
+  for (int y = 0; y < area.rows; ++y)
+    for (int x = 0; x < area.cols; ++x) {
+      const cv::Vec3b p = area.at<cv::Vec3b>(y, x);
+      ink += p != cv::Vec3b(255, 255, 255);
+      red += p[2] > p[0] + 60 && p[2] > p[1] + 30;  // (dots are shaded by depth: judged by hue)
+      blue += p[0] > p[2] + 60 && p[0] > p[1] + 30;
+    }
+  EXPECT_GT(ink, 5000);
+  EXPECT_GT(red, 100);
+  EXPECT_GT(blue, 100);
+  // a wrong number of scalar values is an error naming the counts
+  std::ofstream(dir / "short.txt") << "1\n2\n";
+  r = run("render " + in + " --scalar " + (dir / "short.txt").string() + " --out " + png, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("2 values for the 642 points"), std::string::npos) << r.err;
   std::filesystem::remove_all(dir);
 }

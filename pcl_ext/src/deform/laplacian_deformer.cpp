@@ -8,6 +8,8 @@
 #include <exception>
 #include <cmath>
 #include <map>
+#include <limits>
+#include <set>
 #include <string>
 
 #include "tbsp/core/error.h"
@@ -16,6 +18,7 @@
 #include "tbsp/deform/rotations.h"
 #include "tbsp/mesh/mesh_validation.h"
 #include "tbsp/mesh/topology.h"
+#include "tbsp/solve/blas_threads.h"
 #include "tbsp/solve/sparse_cholesky.h"
 
 #ifdef _OPENMP
@@ -73,7 +76,10 @@ struct LaplacianDeformer::Cache {
   bool graph_valid = false;
   ConstraintGraph graph;
   RotationField field;
-  std::vector<std::vector<int>> node_constraints;  // per node, constraint ids
+  std::vector<std::vector<int>> node_constraints;  // per graph node, constraint ids
+  std::vector<char> node_is_group;                  // per graph node: a handle group
+  std::vector<int> field_vertices;                  // Dirichlet vertices of the rotation field
+  std::vector<int> field_node;                      // per field vertex, its graph node
 };
 
 LaplacianDeformer::LaplacianDeformer() : cache_(std::make_unique<Cache>()) {}
@@ -490,27 +496,90 @@ void LaplacianDeformer::buildRotationGraph(bool with_progress) {
   Cache& c = *cache_;
   if (!user_rotations_.empty() || !use_rotation_field_ || c.graph_valid) return;
   const auto t0 = Clock::now();
-  std::map<int, std::vector<int>> by_vertex;
-  for (std::size_t id = 0; id < constraints_.size(); ++id) {
-    const auto& con = constraints_[id];
-    if (con.type != ConstraintType::Position) continue;
+  // graph nodes: one per handle group (its representative vertex: the one nearest the group's
+  // rest centroid), one per other constrained vertex; the rotation field is pinned at every
+  // constrained vertex, each to its node's rotation. The geodesic searches and the O(k²) graph
+  // grow with the number of nodes, not with the size of the handle regions.
+  std::map<int, std::vector<int>> by_group, by_vertex;
+  auto vertex_of = [&](const DeformConstraint& con) {
     int v = con.at.vertex;
     if (v < 0) {
       int k;
       con.at.bary.maxCoeff(&k);
       v = mesh_.F(con.at.face, k);
     }
-    by_vertex[v].push_back(int(id));
+    return v;
+  };
+  std::map<int, int> group_of_vertex;  // a vertex in several groups belongs to the first
+  for (std::size_t id = 0; id < constraints_.size(); ++id) {
+    const auto& con = constraints_[id];
+    if (con.type != ConstraintType::Position || con.group < 0) continue;
+    by_group[con.group].push_back(int(id));
+    group_of_vertex.emplace(vertex_of(con), con.group);
+  }
+  for (std::size_t id = 0; id < constraints_.size(); ++id) {
+    const auto& con = constraints_[id];
+    if (con.type != ConstraintType::Position || con.group >= 0) continue;
+    const int v = vertex_of(con);
+    auto g = group_of_vertex.find(v);
+    if (g != group_of_vertex.end()) by_group[g->second].push_back(int(id));  // inside a handle region
+    else by_vertex[v].push_back(int(id));
   }
   std::vector<int> nodes;
+  std::set<int> used;
+  std::map<int, int> field_index;  // vertex -> index in field_vertices
   c.node_constraints.clear();
-  for (auto& kv : by_vertex) { nodes.push_back(kv.first); c.node_constraints.push_back(kv.second); }
+  c.node_is_group.clear();
+  c.field_vertices.clear();
+  c.field_node.clear();
+  auto pin = [&](int v, int node) {
+    if (field_index.emplace(v, int(c.field_vertices.size())).second) {
+      c.field_vertices.push_back(v);
+      c.field_node.push_back(node);
+    }
+  };
+  for (auto& [g, ids] : by_group) {
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (int id : ids) centroid += evaluate(constraints_[std::size_t(id)].at, mesh_.V);
+    centroid /= double(ids.size());
+    int rep = -1;
+    double best = std::numeric_limits<double>::infinity();
+    for (int id : ids) {
+      const int v = vertex_of(constraints_[std::size_t(id)]);
+      if (used.count(v)) continue;  // (two groups sharing vertices: distinct representatives)
+      const double d = (mesh_.V.row(v).transpose() - centroid).squaredNorm();
+      if (d < best || (d == best && v < rep)) { best = d; rep = v; }
+    }
+    if (rep < 0) continue;  // every vertex of this group is already another group's: it joins that one
+    used.insert(rep);
+    nodes.push_back(rep);
+    c.node_constraints.push_back(ids);
+    c.node_is_group.push_back(1);
+  }
+  for (auto& [v, ids] : by_vertex) {
+    nodes.push_back(v);
+    c.node_constraints.push_back(ids);
+    c.node_is_group.push_back(0);
+  }
   if (nodes.empty())
     throw InvalidInput("[tbsp::LaplacianDeformer::deform] the rotation field needs position constraints (none set)");
+  // representatives first (their graph order), then the other vertices of each group
+  for (std::size_t i = 0; i < nodes.size(); ++i) pin(nodes[i], int(i));
+  for (std::size_t i = 0; i < nodes.size(); ++i)
+    for (int id : c.node_constraints[i]) pin(vertex_of(constraints_[std::size_t(id)]), int(i));
   ProgressCallback sub;
   if (progress_ && with_progress) sub = [this](double f, const std::string& s) { return progress_(0.05 + 0.2 * f, s); };
   c.graph = ConstraintGraph::build(mesh_.V, mesh_.F, nodes, 3, sub);
-  c.field.compute(mesh_.V, mesh_.F, nodes, c.graph.tree_parent, c.graph.tree_order, weights_);
+  // hemisphere consistency over the field vertices: the graph's tree over the representatives,
+  // each other group vertex a child of its representative (same rotation, same sign)
+  std::vector<int> parent(c.field_vertices.size(), -1), order;
+  for (int i : c.graph.tree_order) order.push_back(i);
+  for (std::size_t i = 0; i < nodes.size(); ++i) parent[i] = c.graph.tree_parent[i];
+  for (std::size_t f = nodes.size(); f < c.field_vertices.size(); ++f) {
+    parent[f] = c.field_node[f];
+    order.push_back(int(f));
+  }
+  c.field.compute(mesh_.V, mesh_.F, c.field_vertices, parent, order, weights_);
   c.graph_valid = true;
   report_.t_graph = seconds_since(t0);
 }
@@ -541,10 +610,31 @@ Eigen::MatrixX3d LaplacianDeformer::rotatedDelta() {
       P.row(Eigen::Index(i)) = p.transpose() / double(c.node_constraints[i].size());
       Q.row(Eigen::Index(i)) = q.transpose() / double(c.node_constraints[i].size());
     }
+    // a handle region without a given rotation: its own best rigid fit (Procrustes of the
+    // centred rest positions to the centred targets), when the region spans more than a line
+    std::vector<char> own(k, 0);
+    std::vector<Eigen::Matrix3d> Rown(k);
+    for (std::size_t i = 0; i < k; ++i) {
+      if (given[i] || !c.node_is_group[i] || c.node_constraints[i].size() < 3) continue;
+      Eigen::Matrix3d H = Eigen::Matrix3d::Zero(), S = Eigen::Matrix3d::Zero();
+      for (int id : c.node_constraints[i]) {
+        const auto& con = constraints_[std::size_t(id)];
+        const Eigen::Vector3d e = evaluate(con.at, mesh_.V) - P.row(Eigen::Index(i)).transpose();
+        const Eigen::Vector3d e2 = con.target - Q.row(Eigen::Index(i)).transpose();
+        H += e2 * e.transpose();
+        S += e * e.transpose();
+      }
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(S);
+      if (es.eigenvalues()(1) > 1e-9 * std::max(es.eigenvalues()(2), 1e-300)) {
+        own[i] = 1;
+        Rown[i] = closest_rotation(H);
+      }
+    }
     bool need_estimate = false;
-    for (std::size_t i = 0; i < k; ++i) need_estimate = need_estimate || !given[i];
+    for (std::size_t i = 0; i < k; ++i) need_estimate = need_estimate || (!given[i] && !own[i]);
     if (need_estimate) {
-      // the estimate needs a 3D-ish configuration: at least 3 nodes not on one line
+      // the estimate from the graph (eq. 3.13) needs a 3D-ish configuration: at least 3 nodes
+      // not on one line
       bool ok = k >= 3;
       if (ok) {
         const Eigen::RowVector3d mean = P.colwise().mean();
@@ -558,9 +648,13 @@ Eigen::MatrixX3d LaplacianDeformer::rotatedDelta() {
                            "rotations explicitly");
     }
     std::vector<Eigen::Matrix3d> R = need_estimate ? node_rotations(c.graph, P, Q) : Rgiven;
-    for (std::size_t i = 0; i < k; ++i)
+    for (std::size_t i = 0; i < k; ++i) {
       if (given[i]) R[i] = Rgiven[i];
-    last_rotations_ = c.field.interpolate(R);
+      else if (own[i]) R[i] = Rown[i];
+    }
+    std::vector<Eigen::Matrix3d> Rf(c.field_vertices.size());
+    for (std::size_t f = 0; f < Rf.size(); ++f) Rf[f] = R[std::size_t(c.field_node[f])];
+    last_rotations_ = c.field.interpolate(Rf);
     report_.rotation_field = true;
     report_.rotation_nodes = int(k);
     report_.t_rotations = seconds_since(t1);
@@ -592,7 +686,10 @@ Eigen::MatrixX3d LaplacianDeformer::deform() {
     if (graph_too && omp_get_max_threads() > 1 && !omp_in_parallel()) {
       // the factorization and the rotation field's set-up (geodesics + a Laplacian system of
       // their own) do not depend on each other: one thread each. Thread 0 is the caller's and
-      // reports progress; errors are rethrown in the sequential order.
+      // reports progress; errors are rethrown in the sequential order. One BLAS thread each:
+      // OpenBLAS's own threads on top of ours oversubscribe the cores (the survey's 40k plane:
+      // 1.25 s with them, 0.75 s on one thread in all).
+      const ScopedBlasThreads blas_threads(1);
       std::exception_ptr err[2];
 #pragma omp parallel num_threads(2)
       {

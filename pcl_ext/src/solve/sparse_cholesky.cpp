@@ -1,5 +1,7 @@
 #include "tbsp/solve/sparse_cholesky.h"
 
+#include "tbsp/solve/blas_threads.h"
+
 #include <Eigen/SparseCholesky>
 #include <vector>
 #ifdef TBSP_HAVE_CHOLMOD
@@ -89,6 +91,10 @@ void SparseCholesky::compute(const Eigen::SparseMatrix<double>& A_in) {
   }
   const Eigen::SparseMatrix<double>& A = A_in.isCompressed() ? A_in : copy;
   const ScopedOmpDynamic omp_dynamic;
+  // one BLAS thread: OpenBLAS splits its GEMM work differently with 1, 2 or 4 threads and the
+  // factor's last bits follow (tests saw 4e-15 between OMP_NUM_THREADS=1 and 2); results must
+  // not depend on the thread count. Our callers parallelise per element instead.
+  const ScopedBlasThreads blas_threads(1);
   Impl& m = *impl_;
   m.factorized = false;
   const bool same_pattern =
@@ -129,6 +135,7 @@ Eigen::MatrixXd SparseCholesky::solve(const Eigen::MatrixXd& B) const {
                        " rows, the system " + std::to_string(m.n));
   Eigen::MatrixXd X;
   const ScopedOmpDynamic omp_dynamic;
+  const ScopedBlasThreads blas_threads(1);  // (see compute)
 #ifdef TBSP_HAVE_CHOLMOD
   if (m.backend == Backend::Cholmod) X = m.cholmod.solve(B);
 #endif

@@ -77,6 +77,13 @@ struct DeformConstraint {
   double weight = 1.0;           ///< w_j of eq. 3.8 (soft constraints only)
   bool hard = false;             ///< exact; only for Position on a vertex
   std::optional<Eigen::Matrix3d> rotation;  ///< user-given local rotation (rotation field node)
+  /// Handle group (default −1: none). Position constraints with the same group ≥ 0 form one
+  /// handle region that moves as a whole (a `vertices` + `transform` group of the constraints
+  /// file): with the rotation field (§3.2.3) the region is *one* node of the constraint graph,
+  /// whatever its size, and all its vertices get one rotation — the given one, or else the best
+  /// rigid fit (Procrustes) of the region's rest positions to its targets. Ungrouped constraints
+  /// are one node per vertex, as before.
+  int group = -1;
 };
 
 /// \brief Residual of one constraint after a solve (distance to target point / line / plane).

@@ -19,6 +19,11 @@ struct RenderPanel {
   std::string title;
   Eigen::MatrixX3d points;      ///< optional point cloud drawn as dots (e.g. the input scan)
   Eigen::MatrixX3d point_colors;  ///< optional, one row per point in [0,1]
+  /// optional colour bar under the panel: the colormap() scale from `lo` to `hi`, labelled
+  /// (e.g. "distance to scan, % of diagonal"); drawn when `colorbar` is true
+  bool colorbar = false;
+  double colorbar_lo = 0, colorbar_hi = 1;
+  std::string colorbar_label;
 };
 
 struct RenderOptions {
@@ -27,7 +32,9 @@ struct RenderOptions {
   bool shared_frame = true;                     ///< all panels use one bounding box (fair comparisons)
 };
 
-/// \brief Renders the panels side by side into one PNG, written atomically. \throws FileError.
+/// \brief Renders the panels side by side into one PNG, written atomically: faces shaded
+/// (back faces tinted), points as dots (shaded by depth), optional colour bars. Every panel's
+/// content fits its frame (8 % margin). \throws FileError.
 void render_panels_png(const std::string& path, const std::vector<RenderPanel>& panels, const RenderOptions& o = {});
 
 /// \brief Maps scalar values to colours (blue → green → yellow → red) over [lo, hi].
