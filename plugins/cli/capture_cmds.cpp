@@ -1,5 +1,7 @@
 #include "capture_cmds.h"
 
+#include "command.h"
+
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -11,6 +13,7 @@
 
 #include "progress_bar.h"
 #include "tbsp/core/error.h"
+#include "tbsp/core/timer.h"
 #include "tbsp/io/cloud_io.h"
 #include "tbsp/io/depth_io.h"
 #include "tbsp/io/studio.h"
@@ -54,11 +57,11 @@ void add_synth_studio(CLI::App& app, SynthStudioArgs& a, CLI::App*& sub) {
 }
 
 int cmd_synth_studio(const SynthStudioArgs& a) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   ProgressBar bar(!a.quiet);
   const auto r = synth::write_synthetic_studio(a.out, a.o, bar.callback());
   bar.finish();
-  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double s = seconds_since(t0);
   if (!a.quiet)
     std::cout << "synthetic studio: " << a.o.cameras << " cameras " << a.o.width << "x" << a.o.height << ", " << a.o.frames
               << " frames, performer " << r.vertices << " vertices / " << r.faces << " faces; " << r.images_written
@@ -86,8 +89,8 @@ int cmd_replay(const ReplayArgs& a) {
   auto out_path = [&](int i) {
     return (fs::path(a.out) / ("cloud_" + expand_frame_pattern("%04d", i) + "." + a.format)).string();
   };
-  const auto t0 = std::chrono::steady_clock::now();
-  auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+  const auto t0 = Clock::now();
+  auto elapsed = [&] { return seconds_since(t0); };
 
   // Studio dataset.
   const bool is_yaml = in.extension() == ".yaml" || in.extension() == ".yml";
@@ -188,6 +191,11 @@ int cmd_replay(const ReplayArgs& a) {
     return 0;
   }
   throw InvalidInput("'" + a.input + "': not a studio (.yaml), an .oni recording or a folder of depth images");
+}
+
+void add_capture_commands(CLI::App& app, CommandTable& table) {
+  register_command<SynthStudioArgs>(app, table, add_synth_studio, cmd_synth_studio);
+  register_command<ReplayArgs>(app, table, add_replay, cmd_replay);
 }
 
 }  // namespace tbsp::cli

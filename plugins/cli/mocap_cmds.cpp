@@ -1,5 +1,7 @@
 #include "mocap_cmds.h"
 
+#include "command.h"
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -164,6 +166,10 @@ int cmd_mocap(const MocapArgs& a) {
   if (ext == ".trc" || ext == ".c3d") return markers_cmd(a, ext);
   if (ext == ".bvh") return bvh_cmd(a);
   throw InvalidInput("'" + a.input + "': unknown motion-capture format '" + ext + "' (tbsp mocap reads .trc, .c3d and .bvh)");
+}
+
+void add_mocap_commands(CLI::App& app, CommandTable& table) {
+  register_command<MocapArgs>(app, table, add_mocap, cmd_mocap);
 }
 
 }  // namespace tbsp::cli

@@ -1,5 +1,7 @@
 #include "tet_cmds.h"
 
+#include "command.h"
+
 #include <chrono>
 #include <filesystem>
 #include <iostream>
@@ -7,6 +9,7 @@
 
 #include "progress_bar.h"
 #include "tbsp/core/error.h"
+#include "tbsp/core/timer.h"
 #include "tbsp/deform/deformation_transfer.h"
 #include "tbsp/deform/tet_deformer.h"
 #include "tbsp/io/atomic_file.h"
@@ -22,8 +25,6 @@ namespace fs = std::filesystem;
 namespace tbsp::cli {
 
 namespace {
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 bool is_tet_file(const std::string& p) {
   std::string ext = fs::path(p).extension().string();
@@ -80,7 +81,7 @@ int cmd_tetdeform(const TetDeformArgs& a) {
     decimated = dec.F.rows() != surface.F.rows() || tets.V.rows() < surface.V.rows() ||
                 !(tets.V.topRows(surface.V.rows()) - surface.V).isZero(0);
   }
-  const double t_tetra = since(t0);
+  const double t_tetra = seconds_since(t0);
   // nearest input vertex of each tet vertex (vertex-list regions, vertex handles)
   const Eigen::Index n_in = input_tets ? tets.V.rows() : surface.V.rows();
   std::vector<Eigen::Index> to_input(std::size_t(tets.V.rows()));
@@ -150,7 +151,7 @@ int cmd_tetdeform(const TetDeformArgs& a) {
     // handle-set problems surface at the first solve; name the file
     throw InvalidInput(a.handles + ": " + e.what());
   }
-  const double t_deform = since(t0);
+  const double t_deform = seconds_since(t0);
   bar.finish();
   const TetDeformReport& r = d.report();
 
@@ -172,7 +173,7 @@ int cmd_tetdeform(const TetDeformArgs& a) {
       t_pre = dt.precomputeSeconds();
       t0 = Clock::now();
       out.V = dt.apply(d.inputPositions());
-      t_apply = since(t0);
+      t_apply = seconds_since(t0);
     }
     out.N.resize(0, 3);
     write_mesh(a.out, out);
@@ -207,7 +208,7 @@ int cmd_tetdeform(const TetDeformArgs& a) {
                       {"per_iteration", {{"def", r.t_def / it}, {"rotext", r.t_rotext / it}, {"rotint", r.t_rotint / it},
                                          {"rigid", r.t_rigid / it}, {"difupd", r.t_difupd / it}, {"total", per_it}}},
                       {"iterations_per_s", per_it > 0 ? 1.0 / per_it : 0.0},
-                      {"transfer_precompute", t_pre}, {"transfer_apply", t_apply}, {"total", since(t_start)}};
+                      {"transfer_precompute", t_pre}, {"transfer_apply", t_apply}, {"total", seconds_since(t_start)}};
   if (!a.report.empty()) write_text_file_atomic(a.report, rep.dump(2) + "\n");
   if (!a.quiet)
     std::cout << "tetdeform: " << r.vertices << " vertices / " << r.tets << " tets, " << r.iterations << " iterations ("
@@ -215,6 +216,10 @@ int cmd_tetdeform(const TetDeformArgs& a) {
               << r.e_nonrigid.back() << ", volume " << (r.volume_ratio - 1) * 100 << " %, " << (per_it > 0 ? 1.0 / per_it : 0)
               << " iterations/s -> " << a.out << "\n";
   return 0;
+}
+
+void add_tet_commands(CLI::App& app, CommandTable& table) {
+  register_command<TetDeformArgs>(app, table, add_tetdeform, cmd_tetdeform);
 }
 
 }  // namespace tbsp::cli

@@ -1,5 +1,7 @@
 #include "texture_cmds.h"
 
+#include "command.h"
+
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -165,6 +167,10 @@ int cmd_texture(const TextureArgs& a) {
               << 100 * p.matched_fraction << "% of " << p.mesh_vertices << " vertices matched, " << p.flipped_uv_faces
               << " flipped UV faces, " << p.t_total << " s -> " << obj.string() << "\n";
   return 0;
+}
+
+void add_texture_commands(CLI::App& app, CommandTable& table) {
+  register_command<TextureArgs>(app, table, add_texture, cmd_texture);
 }
 
 }  // namespace tbsp::cli

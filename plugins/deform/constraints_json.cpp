@@ -13,50 +13,29 @@ namespace tbsp {
 
 namespace {
 
-struct Ctx {
-  const std::string& source;
-  [[noreturn]] void fail(const std::string& where, const std::string& msg) const {
-    throw FileError(source + ": " + where + ": " + msg);
-  }
-};
+using Ctx = JsonReader;
 
-Eigen::Vector3d vec3(const nlohmann::json& j, const Ctx& c, const std::string& where) {
-  if (!j.is_array() || j.size() != 3) c.fail(where, "expected an array of 3 numbers, e.g. [0.1, 0.2, 0.3]");
-  Eigen::Vector3d v;
-  for (int k = 0; k < 3; ++k) {
-    if (!j[std::size_t(k)].is_number()) c.fail(where, "expected an array of 3 numbers, e.g. [0.1, 0.2, 0.3]");
-    v(k) = j[std::size_t(k)].get<double>();
-  }
-  if (!v.allFinite()) c.fail(where, "values must be finite");
-  return v;
-}
 
-double number(const nlohmann::json& j, const Ctx& c, const std::string& where) {
-  if (!j.is_number()) c.fail(where, "expected a number");
-  const double v = j.get<double>();
-  if (!std::isfinite(v)) c.fail(where, "must be finite");
-  return v;
-}
 
 Eigen::Matrix3d rotation(const nlohmann::json& j, const Ctx& c, const std::string& where) {
   if (!j.is_object()) c.fail(where, "expected {\"axis\": [x,y,z], \"angle_deg\": a}, {\"quaternion\": [w,x,y,z]} or {\"matrix\": [[..],[..],[..]]}");
   Eigen::Matrix3d R;
   if (j.contains("axis")) {
-    const Eigen::Vector3d axis = vec3(j["axis"], c, where + ".axis");
+    const Eigen::Vector3d axis = c.vec3(j["axis"], where + ".axis");
     if (axis.norm() < 1e-12) c.fail(where + ".axis", "must be non-zero");
     if (!j.contains("angle_deg")) c.fail(where, "axis given without angle_deg");
-    R = Eigen::AngleAxisd(number(j["angle_deg"], c, where + ".angle_deg") * M_PI / 180.0, axis.normalized()).toRotationMatrix();
+    R = Eigen::AngleAxisd(c.number(j["angle_deg"], where + ".angle_deg") * M_PI / 180.0, axis.normalized()).toRotationMatrix();
   } else if (j.contains("quaternion")) {
     const auto& q = j["quaternion"];
     if (!q.is_array() || q.size() != 4) c.fail(where + ".quaternion", "expected [w, x, y, z]");
-    Eigen::Quaterniond qq(number(q[0], c, where + ".quaternion"), number(q[1], c, where + ".quaternion"),
-                          number(q[2], c, where + ".quaternion"), number(q[3], c, where + ".quaternion"));
+    Eigen::Quaterniond qq(c.number(q[0], where + ".quaternion"), c.number(q[1], where + ".quaternion"),
+                          c.number(q[2], where + ".quaternion"), c.number(q[3], where + ".quaternion"));
     if (qq.norm() < 1e-12) c.fail(where + ".quaternion", "must be non-zero");
     R = qq.normalized().toRotationMatrix();
   } else if (j.contains("matrix")) {
     const auto& m = j["matrix"];
     if (!m.is_array() || m.size() != 3) c.fail(where + ".matrix", "expected 3 rows of 3 numbers");
-    for (int r = 0; r < 3; ++r) R.row(r) = vec3(m[std::size_t(r)], c, where + ".matrix[" + std::to_string(r) + "]").transpose();
+    for (int r = 0; r < 3; ++r) R.row(r) = c.vec3(m[std::size_t(r)], where + ".matrix[" + std::to_string(r) + "]").transpose();
     if ((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
       c.fail(where + ".matrix", "is not a rotation (orthonormal with determinant +1)");
   } else {
@@ -72,19 +51,11 @@ Eigen::Matrix4d transform(const nlohmann::json& j, const Ctx& c, const std::stri
   for (std::size_t r = 0; r < j.size(); ++r) {
     const auto& row = j[r];
     if (!row.is_array() || row.size() != 4) c.fail(where + "[" + std::to_string(r) + "]", "expected 4 numbers");
-    for (int k = 0; k < 4; ++k) M(Eigen::Index(r), k) = number(row[std::size_t(k)], c, where + "[" + std::to_string(r) + "]");
+    for (int k = 0; k < 4; ++k) M(Eigen::Index(r), k) = c.number(row[std::size_t(k)], where + "[" + std::to_string(r) + "]");
   }
   return M;
 }
 
-int index(const nlohmann::json& j, const Ctx& c, const std::string& where, Eigen::Index limit, const char* kind) {
-  if (!j.is_number_integer()) c.fail(where, std::string("expected an integer ") + kind + " index");
-  const long long v = j.get<long long>();
-  if (v < 0 || v >= limit)
-    c.fail(where, std::string(kind) + " " + std::to_string(v) + " does not exist: the mesh has " + std::to_string(limit) + " " +
-                      kind + "s (valid: 0.." + std::to_string(limit - 1) + ")");
-  return int(v);
-}
 
 }  // namespace
 
@@ -92,24 +63,15 @@ DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh,
   const Ctx c{source};
   DeformJob job;
   if (!doc.is_object()) c.fail("top level", "expected an object with a \"constraints\" array");
-  for (auto it = doc.begin(); it != doc.end(); ++it)
-    if (it.key() != "constraints" && it.key() != "laplacian" && it.key() != "rotation_field" && it.key() != "scale" &&
-        it.key() != "comment")
-      c.fail(it.key(), "unknown key (known: constraints, laplacian, rotation_field, scale, comment)");
+  c.check_keys(doc, {"constraints", "laplacian", "rotation_field", "scale", "comment"}, "top level");
   if (doc.contains("laplacian")) {
     const auto& l = doc["laplacian"];
     if (l == "cotangent") job.weights = LaplacianWeights::Cotangent;
     else if (l == "uniform") job.weights = LaplacianWeights::Uniform;
     else c.fail("laplacian", "expected \"cotangent\" or \"uniform\"");
   }
-  if (doc.contains("rotation_field")) {
-    if (!doc["rotation_field"].is_boolean()) c.fail("rotation_field", "expected true or false");
-    job.rotation_field = doc["rotation_field"].get<bool>();
-  }
-  if (doc.contains("scale")) {
-    job.scale = number(doc["scale"], c, "scale");
-    if (!(job.scale > 0)) c.fail("scale", "must be > 0");
-  }
+  if (doc.contains("rotation_field")) job.rotation_field = c.boolean(doc["rotation_field"], "rotation_field");
+  if (doc.contains("scale")) job.scale = c.positive(doc["scale"], "scale");
   if (!doc.contains("constraints") || !doc["constraints"].is_array())
     c.fail("constraints", "missing: expected an array of constraint objects");
   const auto& arr = doc["constraints"];
@@ -117,12 +79,9 @@ DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh,
     const std::string w = "constraints[" + std::to_string(i) + "]";
     const auto& j = arr[i];
     if (!j.is_object()) c.fail(w, "expected an object");
-    for (auto it = j.begin(); it != j.end(); ++it) {
-      static const char* known[] = {"vertex", "vertices", "face", "bary", "type", "target", "point", "direction",
-                                    "normal", "weight", "hard", "rotation", "transform", "comment"};
-      if (std::find(std::begin(known), std::end(known), it.key()) == std::end(known))
-        c.fail(w + "." + it.key(), "unknown key");
-    }
+    c.check_keys(j, {"vertex", "vertices", "face", "bary", "type", "target", "point", "direction", "normal", "weight", "hard",
+                     "rotation", "transform", "comment"},
+                 w);
     DeformConstraint d;
     if (j.contains("type") && !j["type"].is_string())
       c.fail(w + ".type", "expected a string: \"position\", \"line\" or \"plane\"");
@@ -131,14 +90,8 @@ DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh,
     else if (type == "line") d.type = ConstraintType::Line;
     else if (type == "plane") d.type = ConstraintType::Plane;
     else c.fail(w + ".type", "unknown type '" + type + "' (position, line or plane)");
-    if (j.contains("weight")) {
-      d.weight = number(j["weight"], c, w + ".weight");
-      if (!(d.weight > 0)) c.fail(w + ".weight", "must be > 0");
-    }
-    if (j.contains("hard")) {
-      if (!j["hard"].is_boolean()) c.fail(w + ".hard", "expected true or false");
-      d.hard = j["hard"].get<bool>();
-    }
+    if (j.contains("weight")) d.weight = c.positive(j["weight"], w + ".weight");
+    if (j.contains("hard")) d.hard = c.boolean(j["hard"], w + ".hard");
     if (j.contains("rotation")) d.rotation = rotation(j["rotation"], c, w + ".rotation");
     const int where_count = int(j.contains("vertex")) + int(j.contains("vertices")) + int(j.contains("face"));
     if (where_count != 1) c.fail(w, "give exactly one of \"vertex\", \"vertices\" or \"face\" (+ \"bary\")");
@@ -158,7 +111,7 @@ DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh,
       for (std::size_t k = 0; k < vs.size(); ++k) {
         DeformConstraint e = d;
         e.group = int(i);  // one handle: one node of the rotation field, whatever its size
-        e.at = SurfacePoint::atVertex(index(vs[k], c, w + ".vertices[" + std::to_string(k) + "]", mesh.V.rows(), "vertex"));
+        e.at = SurfacePoint::atVertex(c.index(vs[k], w + ".vertices[" + std::to_string(k) + "]", mesh.V.rows(), "vertex"));
         e.target = (M * mesh.V.row(e.at.vertex).transpose().homogeneous()).head<3>();
         if (!e.rotation && rigid) e.rotation = Rm;
         job.constraints.push_back(e);
@@ -167,23 +120,23 @@ DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh,
     }
     if (j.contains("transform")) c.fail(w + ".transform", "\"transform\" goes with \"vertices\"");
     if (j.contains("vertex")) {
-      d.at = SurfacePoint::atVertex(index(j["vertex"], c, w + ".vertex", mesh.V.rows(), "vertex"));
+      d.at = SurfacePoint::atVertex(c.index(j["vertex"], w + ".vertex", mesh.V.rows(), "vertex"));
     } else {
-      const int f = index(j["face"], c, w + ".face", mesh.F.rows(), "face");
+      const int f = c.index(j["face"], w + ".face", mesh.F.rows(), "face");
       if (!j.contains("bary")) c.fail(w, "\"face\" needs \"bary\": barycentric coordinates [b0, b1, b2]");
-      const Eigen::Vector3d b = vec3(j["bary"], c, w + ".bary");
+      const Eigen::Vector3d b = c.vec3(j["bary"], w + ".bary");
       if ((b.array() < -1e-9).any() || std::abs(b.sum() - 1) > 1e-6) c.fail(w + ".bary", "must be >= 0 and sum to 1");
       d.at = SurfacePoint::onFace(f, b);
     }
     if (d.type == ConstraintType::Position) {
       if (!j.contains("target")) c.fail(w, "position constraints need \"target\": [x, y, z]");
-      d.target = vec3(j["target"], c, w + ".target");
+      d.target = c.vec3(j["target"], w + ".target");
     } else {
       const char* axis_key = d.type == ConstraintType::Line ? "direction" : "normal";
       if (!j.contains("point") || !j.contains(axis_key))
         c.fail(w, std::string(type) + " constraints need \"point\" and \"" + axis_key + "\"");
-      d.target = vec3(j["point"], c, w + ".point");
-      d.axis = vec3(j[axis_key], c, w + "." + axis_key);
+      d.target = c.vec3(j["point"], w + ".point");
+      d.axis = c.vec3(j[axis_key], w + "." + axis_key);
       if (d.axis.norm() < 1e-12) c.fail(w + "." + axis_key, "must be non-zero");
     }
     job.constraints.push_back(d);

@@ -11,75 +11,37 @@ namespace tbsp {
 namespace {
 using json = nlohmann::json;
 
-[[noreturn]] void fail(const std::string& source, const std::string& where, const std::string& msg) {
-  throw FileError(source + ": " + where + ": " + msg);
-}
-
-Eigen::Vector3d vec3(const json& j, const std::string& source, const std::string& where) {
-  if (!j.is_array() || j.size() != 3) fail(source, where, "expected an array of 3 numbers");
-  Eigen::Vector3d v;
-  for (int k = 0; k < 3; ++k) {
-    if (!j[std::size_t(k)].is_number()) fail(source, where, "expected an array of 3 numbers");
-    v(k) = j[std::size_t(k)].get<double>();
-    if (!std::isfinite(v(k))) fail(source, where, "non-finite value");
-  }
-  return v;
-}
-
-double number(const json& j, const std::string& source, const std::string& where) {
-  if (!j.is_number()) fail(source, where, "expected a number");
-  const double v = j.get<double>();
-  if (!std::isfinite(v)) fail(source, where, "non-finite value");
-  return v;
-}
-
-int vertex_index(const json& j, Eigen::Index n, const std::string& source, const std::string& where) {
-  if (!j.is_number_integer()) fail(source, where, "expected a vertex index (integer)");
-  const long long v = j.get<long long>();
-  if (v < 0 || v >= n)
-    fail(source, where, "vertex " + std::to_string(v) + " does not exist (the input mesh has " + std::to_string(n) + " vertices)");
-  return int(v);
-}
-
 // Reads one region from the keys "vertices" | "sphere" | "box" of `j`; false if none present.
-bool parse_region(const json& j, Eigen::Index n, const std::string& source, const std::string& where, TetRegion& r) {
+bool parse_region(const json& j, Eigen::Index n, const JsonReader& in, const std::string& where, TetRegion& r) {
   int count = int(j.contains("vertices")) + int(j.contains("sphere")) + int(j.contains("box"));
   if (count == 0) return false;
-  if (count > 1) fail(source, where, "give one of \"vertices\", \"sphere\" or \"box\", not several");
+  if (count > 1) in.fail(where, "give one of \"vertices\", \"sphere\" or \"box\", not several");
   if (j.contains("vertices")) {
     const json& v = j["vertices"];
-    if (!v.is_array() || v.empty()) fail(source, where + ".vertices", "expected a non-empty array of vertex indices");
+    if (!v.is_array() || v.empty()) in.fail(where + ".vertices", "expected a non-empty array of vertex indices");
     r.kind = TetRegion::Vertices;
     for (std::size_t i = 0; i < v.size(); ++i)
-      r.vertices.push_back(vertex_index(v[i], n, source, where + ".vertices[" + std::to_string(i) + "]"));
+      r.vertices.push_back(in.index(v[i], where + ".vertices[" + std::to_string(i) + "]", n, "vertex"));
   } else if (j.contains("sphere")) {
     const json& s = j["sphere"];
     if (!s.is_object() || !s.contains("center") || !s.contains("radius"))
-      fail(source, where + ".sphere", "expected {\"center\": [x, y, z], \"radius\": r}");
+      in.fail(where + ".sphere", "expected {\"center\": [x, y, z], \"radius\": r}");
     r.kind = TetRegion::Sphere;
-    r.a = vec3(s["center"], source, where + ".sphere.center");
-    r.radius = number(s["radius"], source, where + ".sphere.radius");
-    if (!(r.radius > 0)) fail(source, where + ".sphere.radius", "must be > 0");
+    r.a = in.vec3(s["center"], where + ".sphere.center");
+    r.radius = in.number(s["radius"], where + ".sphere.radius");
+    if (!(r.radius > 0)) in.fail(where + ".sphere.radius", "must be > 0");
   } else {
     const json& b = j["box"];
     if (!b.is_object() || !b.contains("min") || !b.contains("max"))
-      fail(source, where + ".box", "expected {\"min\": [x, y, z], \"max\": [x, y, z]}");
+      in.fail(where + ".box", "expected {\"min\": [x, y, z], \"max\": [x, y, z]}");
     r.kind = TetRegion::Box;
-    r.a = vec3(b["min"], source, where + ".box.min");
-    r.b = vec3(b["max"], source, where + ".box.max");
-    if ((r.b.array() < r.a.array()).any()) fail(source, where + ".box", "min must not exceed max");
+    r.a = in.vec3(b["min"], where + ".box.min");
+    r.b = in.vec3(b["max"], where + ".box.max");
+    if ((r.b.array() < r.a.array()).any()) in.fail(where + ".box", "min must not exceed max");
   }
   return true;
 }
 
-void check_keys(const json& j, const std::vector<std::string>& allowed, const std::string& source, const std::string& where) {
-  for (auto it = j.begin(); it != j.end(); ++it)
-    if (std::find(allowed.begin(), allowed.end(), it.key()) == allowed.end()) {
-      std::string list;
-      for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
-      fail(source, where, "unknown key \"" + it.key() + "\" (known: " + list + ")");
-    }
-}
 }  // namespace
 
 bool TetRegion::contains(const Eigen::Vector3d& p) const {
@@ -89,65 +51,66 @@ bool TetRegion::contains(const Eigen::Vector3d& p) const {
 }
 
 void parse_tet_handles(const json& doc, Eigen::Index n, const std::string& source, TetJob& job) try {
-  if (!doc.is_object()) fail(source, "top level", "expected an object with a \"handles\" array");
-  check_keys(doc, {"handles", "iterations", "rotation_interpolation", "max_step_degrees", "comment"}, source, "top level");
+  const JsonReader in(source);
+  if (!doc.is_object()) in.fail("top level", "expected an object with a \"handles\" array");
+  in.check_keys(doc, {"handles", "iterations", "rotation_interpolation", "max_step_degrees", "comment"}, "top level");
   if (!doc.contains("handles") || !doc["handles"].is_array())
-    fail(source, "handles", "missing: give an array of handles (docs/tetdeform_json.md)");
+    in.fail("handles", "missing: give an array of handles (docs/tetdeform_json.md)");
   const json& hs = doc["handles"];
-  if (hs.empty()) fail(source, "handles", "empty: at least one handle is needed, or the deformation is undetermined");
+  if (hs.empty()) in.fail("handles", "empty: at least one handle is needed, or the deformation is undetermined");
   for (std::size_t i = 0; i < hs.size(); ++i) {
     const std::string w = "handles[" + std::to_string(i) + "]";
     const json& h = hs[i];
-    if (!h.is_object()) fail(source, w, "expected an object");
-    check_keys(h, {"vertices", "sphere", "box", "vertex", "point", "target", "translate", "rotate", "comment"}, source, w);
+    if (!h.is_object()) in.fail(w, "expected an object");
+    in.check_keys(h, {"vertices", "sphere", "box", "vertex", "point", "target", "translate", "rotate", "comment"}, w);
     TetHandleSpec spec;
     spec.where = w;
     if (h.contains("vertex") || h.contains("point")) {
-      if (h.contains("vertex") && h.contains("point")) fail(source, w, "give \"vertex\" or \"point\", not both");
-      if (!h.contains("target")) fail(source, w, "a vertex or point handle needs a \"target\": [x, y, z]");
+      if (h.contains("vertex") && h.contains("point")) in.fail(w, "give \"vertex\" or \"point\", not both");
+      if (!h.contains("target")) in.fail(w, "a vertex or point handle needs a \"target\": [x, y, z]");
       if (h.contains("rotate") || h.contains("translate"))
-        fail(source, w, "vertex/point handles take a \"target\"; \"rotate\"/\"translate\" belong to regions");
+        in.fail(w, "vertex/point handles take a \"target\"; \"rotate\"/\"translate\" belong to regions");
       if (h.contains("vertex")) {
         spec.kind = TetHandleSpec::Vertex;
-        spec.vertex = vertex_index(h["vertex"], n, source, w + ".vertex");
+        spec.vertex = in.index(h["vertex"], w + ".vertex", n, "vertex");
       } else {
         spec.kind = TetHandleSpec::Point;
-        spec.point = vec3(h["point"], source, w + ".point");
+        spec.point = in.vec3(h["point"], w + ".point");
       }
-      spec.target = vec3(h["target"], source, w + ".target");
+      spec.target = in.vec3(h["target"], w + ".target");
     } else {
       spec.kind = TetHandleSpec::Region;
-      if (!parse_region(h, n, source, w, spec.region))
-        fail(source, w, "a handle needs \"vertices\", \"sphere\", \"box\" (regions) or \"vertex\"/\"point\" + \"target\"");
-      if (h.contains("target")) fail(source, w, "regions move by \"translate\"/\"rotate\", not \"target\"");
-      if (h.contains("translate")) spec.motion.translation = vec3(h["translate"], source, w + ".translate");
+      if (!parse_region(h, n, in, w, spec.region))
+        in.fail(w, "a handle needs \"vertices\", \"sphere\", \"box\" (regions) or \"vertex\"/\"point\" + \"target\"");
+      if (h.contains("target")) in.fail(w, "regions move by \"translate\"/\"rotate\", not \"target\"");
+      if (h.contains("translate")) spec.motion.translation = in.vec3(h["translate"], w + ".translate");
       if (h.contains("rotate")) {
         const json& r = h["rotate"];
         const std::string wr = w + ".rotate";
         if (!r.is_object() || !r.contains("axis") || !r.contains("degrees"))
-          fail(source, wr, "expected {\"axis\": [x, y, z], \"degrees\": a, \"center\": [x, y, z]}");
-        check_keys(r, {"axis", "degrees", "center"}, source, wr);
-        spec.motion.axis = vec3(r["axis"], source, wr + ".axis");
-        if (!(spec.motion.axis.norm() > 0)) fail(source, wr + ".axis", "the axis is zero");
-        spec.motion.angle = number(r["degrees"], source, wr + ".degrees") * M_PI / 180.0;
-        if (r.contains("center")) spec.motion.center = vec3(r["center"], source, wr + ".center");
-        else fail(source, wr, "missing \"center\": the point the region turns about");
+          in.fail(wr, "expected {\"axis\": [x, y, z], \"degrees\": a, \"center\": [x, y, z]}");
+        in.check_keys(r, {"axis", "degrees", "center"}, wr);
+        spec.motion.axis = in.vec3(r["axis"], wr + ".axis");
+        if (!(spec.motion.axis.norm() > 0)) in.fail(wr + ".axis", "the axis is zero");
+        spec.motion.angle = in.number(r["degrees"], wr + ".degrees") * M_PI / 180.0;
+        if (r.contains("center")) spec.motion.center = in.vec3(r["center"], wr + ".center");
+        else in.fail(wr, "missing \"center\": the point the region turns about");
       }
     }
     job.handles.push_back(spec);
   }
   if (doc.contains("iterations")) {
     if (!doc["iterations"].is_number_integer() || doc["iterations"].get<long long>() < 1)
-      fail(source, "iterations", "expected a positive integer");
+      in.fail("iterations", "expected a positive integer");
     job.iterations = int(doc["iterations"].get<long long>());
   }
   if (doc.contains("rotation_interpolation")) {
-    if (!doc["rotation_interpolation"].is_boolean()) fail(source, "rotation_interpolation", "expected true or false");
+    if (!doc["rotation_interpolation"].is_boolean()) in.fail("rotation_interpolation", "expected true or false");
     job.rotation_interpolation = doc["rotation_interpolation"].get<bool>();
   }
   if (doc.contains("max_step_degrees")) {
-    const double v = number(doc["max_step_degrees"], source, "max_step_degrees");
-    if (!(v > 0 && v < 180)) fail(source, "max_step_degrees", "must be in (0, 180)");
+    const double v = in.number(doc["max_step_degrees"], "max_step_degrees");
+    if (!(v > 0 && v < 180)) in.fail("max_step_degrees", "must be in (0, 180)");
     job.max_step_degrees = v;
   }
 } catch (const nlohmann::json::exception& e) {
@@ -155,15 +118,16 @@ void parse_tet_handles(const json& doc, Eigen::Index n, const std::string& sourc
 }
 
 void parse_tet_rigid(const json& doc, Eigen::Index n, const std::string& source, TetJob& job) try {
+  const JsonReader in(source);
   if (!doc.is_object() || !doc.contains("rigid") || !doc["rigid"].is_array())
-    fail(source, "top level", "expected {\"rigid\": [region, ...]} (docs/tetdeform_json.md)");
+    in.fail("top level", "expected {\"rigid\": [region, ...]} (docs/tetdeform_json.md)");
   const json& rs = doc["rigid"];
   for (std::size_t i = 0; i < rs.size(); ++i) {
     const std::string w = "rigid[" + std::to_string(i) + "]";
-    if (!rs[i].is_object()) fail(source, w, "expected an object");
-    check_keys(rs[i], {"vertices", "sphere", "box", "comment"}, source, w);
+    if (!rs[i].is_object()) in.fail(w, "expected an object");
+    in.check_keys(rs[i], {"vertices", "sphere", "box", "comment"}, w);
     TetRegion r;
-    if (!parse_region(rs[i], n, source, w, r)) fail(source, w, "needs \"vertices\", \"sphere\" or \"box\"");
+    if (!parse_region(rs[i], n, in, w, r)) in.fail(w, "needs \"vertices\", \"sphere\" or \"box\"");
     job.rigid.push_back(r);
   }
 } catch (const nlohmann::json::exception& e) {
@@ -171,24 +135,25 @@ void parse_tet_rigid(const json& doc, Eigen::Index n, const std::string& source,
 }
 
 void parse_tet_stiffness(const json& doc, Eigen::Index n, const std::string& source, TetJob& job) try {
-  if (!doc.is_object()) fail(source, "top level", "expected {\"default\": s, \"regions\": [...]}");
-  check_keys(doc, {"default", "regions", "comment"}, source, "top level");
+  const JsonReader in(source);
+  if (!doc.is_object()) in.fail("top level", "expected {\"default\": s, \"regions\": [...]}");
+  in.check_keys(doc, {"default", "regions", "comment"}, "top level");
   if (doc.contains("default")) {
-    job.default_stiffness = number(doc["default"], source, "default");
-    if (!(job.default_stiffness > 0)) fail(source, "default", "stiffness must be > 0");
+    job.default_stiffness = in.number(doc["default"], "default");
+    if (!(job.default_stiffness > 0)) in.fail("default", "stiffness must be > 0");
   }
   if (doc.contains("regions")) {
-    if (!doc["regions"].is_array()) fail(source, "regions", "expected an array");
+    if (!doc["regions"].is_array()) in.fail("regions", "expected an array");
     const json& rs = doc["regions"];
     for (std::size_t i = 0; i < rs.size(); ++i) {
       const std::string w = "regions[" + std::to_string(i) + "]";
-      if (!rs[i].is_object()) fail(source, w, "expected an object");
-      check_keys(rs[i], {"vertices", "sphere", "box", "stiffness", "comment"}, source, w);
+      if (!rs[i].is_object()) in.fail(w, "expected an object");
+      in.check_keys(rs[i], {"vertices", "sphere", "box", "stiffness", "comment"}, w);
       TetRegion r;
-      if (!parse_region(rs[i], n, source, w, r)) fail(source, w, "needs \"vertices\", \"sphere\" or \"box\"");
-      if (!rs[i].contains("stiffness")) fail(source, w, "missing \"stiffness\"");
-      const double s = number(rs[i]["stiffness"], source, w + ".stiffness");
-      if (!(s > 0)) fail(source, w + ".stiffness", "must be > 0 (mark rigid parts with --rigid instead)");
+      if (!parse_region(rs[i], n, in, w, r)) in.fail(w, "needs \"vertices\", \"sphere\" or \"box\"");
+      if (!rs[i].contains("stiffness")) in.fail(w, "missing \"stiffness\"");
+      const double s = in.number(rs[i]["stiffness"], w + ".stiffness");
+      if (!(s > 0)) in.fail(w + ".stiffness", "must be > 0 (mark rigid parts with --rigid instead)");
       job.stiffness.push_back({r, s});
     }
   }

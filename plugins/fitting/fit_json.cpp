@@ -16,53 +16,37 @@ nlohmann::json load(const std::string& path) {
   if (!doc.is_object()) throw FileError(path + ": expected a JSON object");
   return doc;
 }
-[[noreturn]] void fail(const std::string& path, const std::string& where, const std::string& msg) {
-  throw FileError(path + ": " + where + ": " + msg);
-}
-Eigen::Vector3d vec3(const nlohmann::json& j, const std::string& path, const std::string& where) {
-  if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() || !j[2].is_number())
-    fail(path, where, "expected an array of 3 numbers");
-  Eigen::Vector3d v(j[0].get<double>(), j[1].get<double>(), j[2].get<double>());
-  if (!v.allFinite()) fail(path, where, "values must be finite");
-  return v;
-}
-long long integer(const nlohmann::json& j, const std::string& path, const std::string& where) {
-  if (!j.is_number_integer()) fail(path, where, "expected an integer");
-  return j.get<long long>();
-}
 }  // namespace
 
 std::vector<FitMarker> load_markers_json(const std::string& path) try {
+  const JsonReader in(path);
   const nlohmann::json doc = load(path);
-  if (!doc.contains("markers") || !doc["markers"].is_array()) fail(path, "markers", "missing: expected an array");
+  if (!doc.contains("markers") || !doc["markers"].is_array()) in.fail("markers", "missing: expected an array");
   std::vector<FitMarker> out;
   const auto& a = doc["markers"];
   for (std::size_t i = 0; i < a.size(); ++i) {
     const std::string w = "markers[" + std::to_string(i) + "]";
     const auto& j = a[i];
-    if (!j.is_object()) fail(path, w, "expected an object");
-    for (auto it = j.begin(); it != j.end(); ++it)
-      if (it.key() != "template_vertex" && it.key() != "cloud_index" && it.key() != "position" && it.key() != "weight" &&
-          it.key() != "rotation" && it.key() != "comment")
-        fail(path, w + "." + it.key(), "unknown key (template_vertex, cloud_index, position, weight, rotation)");
+    if (!j.is_object()) in.fail(w, "expected an object");
+    in.check_keys(j, {"template_vertex", "cloud_index", "position", "weight", "rotation", "comment"}, w);
     FitMarker m;
-    if (!j.contains("template_vertex")) fail(path, w, "needs \"template_vertex\"");
-    m.template_vertex = int(integer(j["template_vertex"], path, w + ".template_vertex"));
+    if (!j.contains("template_vertex")) in.fail(w, "needs \"template_vertex\"");
+    const long long tv = in.integer(j["template_vertex"], w + ".template_vertex");
+    if (tv < 0 || tv > 2000000000LL) in.fail(w + ".template_vertex", "template vertex " + std::to_string(tv) + " does not exist");
+    m.template_vertex = int(tv);
     if (j.contains("cloud_index") == j.contains("position"))
-      fail(path, w, "give exactly one of \"cloud_index\" (a point of the cloud) or \"position\" (a free marker)");
-    if (j.contains("cloud_index")) m.cloud_index = integer(j["cloud_index"], path, w + ".cloud_index");
-    else m.position = vec3(j["position"], path, w + ".position");
-    if (j.contains("weight")) {
-      if (!j["weight"].is_number() || !(j["weight"].get<double>() > 0)) fail(path, w + ".weight", "must be a number > 0");
-      m.weight = j["weight"].get<double>();
-    }
+      in.fail(w, "give exactly one of \"cloud_index\" (a point of the cloud) or \"position\" (a free marker)");
+    if (j.contains("cloud_index")) m.cloud_index = in.integer(j["cloud_index"], w + ".cloud_index");
+    else m.position = in.vec3(j["position"], w + ".position");
+    if (j.contains("weight")) m.weight = in.positive(j["weight"], w + ".weight");
     if (j.contains("rotation")) {
       const auto& r = j["rotation"];
-      if (!r.is_object() || !r.contains("axis") || !r.contains("angle_deg") || !r["angle_deg"].is_number())
-        fail(path, w + ".rotation", "expected {\"axis\": [x,y,z], \"angle_deg\": a}");
-      const Eigen::Vector3d ax = vec3(r["axis"], path, w + ".rotation.axis");
-      if (ax.norm() < 1e-12) fail(path, w + ".rotation.axis", "must be non-zero");
-      m.rotation = Eigen::AngleAxisd(r["angle_deg"].get<double>() * M_PI / 180, ax.normalized()).toRotationMatrix();
+      if (!r.is_object() || !r.contains("axis") || !r.contains("angle_deg"))
+        in.fail(w + ".rotation", "expected {\"axis\": [x,y,z], \"angle_deg\": a}");
+      const Eigen::Vector3d ax = in.vec3(r["axis"], w + ".rotation.axis");
+      if (ax.norm() < 1e-12) in.fail(w + ".rotation.axis", "must be non-zero");
+      m.rotation = Eigen::AngleAxisd(in.number(r["angle_deg"], w + ".rotation.angle_deg") * M_PI / 180, ax.normalized())
+                       .toRotationMatrix();
     }
     out.push_back(m);
   }
@@ -72,41 +56,40 @@ std::vector<FitMarker> load_markers_json(const std::string& path) try {
 }
 
 RegionOfInterest load_roi_json(const std::string& path) try {
+  const JsonReader in(path);
   const nlohmann::json doc = load(path);
   RegionOfInterest roi;
   auto spheres = [&](const char* key, std::vector<Sphere>& out) {
     if (!doc.contains(key)) return;
-    if (!doc[key].is_array()) fail(path, key, "expected an array");
+    if (!doc[key].is_array()) in.fail(key, "expected an array");
     for (std::size_t i = 0; i < doc[key].size(); ++i) {
       const std::string w = std::string(key) + "[" + std::to_string(i) + "]";
       const auto& j = doc[key][i];
-      if (!j.is_object() || !j.contains("center") || !j.contains("radius") || !j["radius"].is_number())
-        fail(path, w, "expected {\"center\": [x,y,z], \"radius\": r}");
-      out.push_back({vec3(j["center"], path, w + ".center"), j["radius"].get<double>()});
+      if (!j.is_object() || !j.contains("center") || !j.contains("radius"))
+        in.fail(w, "expected {\"center\": [x,y,z], \"radius\": r}");
+      out.push_back({in.vec3(j["center"], w + ".center"), in.positive(j["radius"], w + ".radius")});
     }
   };
   auto boxes = [&](const char* key, std::vector<Box>& out) {
     if (!doc.contains(key)) return;
-    if (!doc[key].is_array()) fail(path, key, "expected an array");
+    if (!doc[key].is_array()) in.fail(key, "expected an array");
     for (std::size_t i = 0; i < doc[key].size(); ++i) {
       const std::string w = std::string(key) + "[" + std::to_string(i) + "]";
       const auto& j = doc[key][i];
-      if (!j.is_object() || !j.contains("min") || !j.contains("max")) fail(path, w, "expected {\"min\": [..], \"max\": [..]}");
-      out.push_back({vec3(j["min"], path, w + ".min"), vec3(j["max"], path, w + ".max")});
+      if (!j.is_object() || !j.contains("min") || !j.contains("max")) in.fail(w, "expected {\"min\": [..], \"max\": [..]}");
+      out.push_back({in.vec3(j["min"], w + ".min"), in.vec3(j["max"], w + ".max")});
     }
   };
-  for (auto it = doc.begin(); it != doc.end(); ++it) {
-    static const char* known[] = {"exclude_template_vertices", "exclude_template_spheres", "exclude_template_boxes",
-                                  "exclude_cloud_points", "exclude_cloud_spheres", "exclude_cloud_boxes", "comment"};
-    if (std::find(std::begin(known), std::end(known), it.key()) == std::end(known)) fail(path, it.key(), "unknown key");
-  }
+  in.check_keys(doc, {"exclude_template_vertices", "exclude_template_spheres", "exclude_template_boxes", "exclude_cloud_points",
+                      "exclude_cloud_spheres", "exclude_cloud_boxes", "comment"},
+                "top level");
   if (doc.contains("exclude_template_vertices")) {
-    if (!doc["exclude_template_vertices"].is_array()) fail(path, "exclude_template_vertices", "expected an array");
-    for (const auto& v : doc["exclude_template_vertices"]) roi.exclude_template_vertices.push_back(int(integer(v, path, "exclude_template_vertices")));
+    if (!doc["exclude_template_vertices"].is_array()) in.fail("exclude_template_vertices", "expected an array");
+    for (const auto& v : doc["exclude_template_vertices"]) roi.exclude_template_vertices.push_back(int(in.integer(v, "exclude_template_vertices")));
   }
   if (doc.contains("exclude_cloud_points")) {
-    if (!doc["exclude_cloud_points"].is_array()) fail(path, "exclude_cloud_points", "expected an array");
-    for (const auto& v : doc["exclude_cloud_points"]) roi.exclude_cloud_points.push_back(integer(v, path, "exclude_cloud_points"));
+    if (!doc["exclude_cloud_points"].is_array()) in.fail("exclude_cloud_points", "expected an array");
+    for (const auto& v : doc["exclude_cloud_points"]) roi.exclude_cloud_points.push_back(in.integer(v, "exclude_cloud_points"));
   }
   spheres("exclude_template_spheres", roi.exclude_template_spheres);
   spheres("exclude_cloud_spheres", roi.exclude_cloud_spheres);

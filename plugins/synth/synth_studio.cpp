@@ -8,6 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <pcl/io/pcd_io.h>
 
+#include "tbsp/io/render_images.h"
 #include "tbsp/core/error.h"
 #include "tbsp/io/atomic_file.h"
 #include "tbsp/io/mesh_io.h"
@@ -232,7 +233,7 @@ StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions&
           atomic_write_with(path, [&](const std::string& tmp) { return cv::imwrite(tmp + ".png", im) && (fs::rename(tmp + ".png", tmp), true); });
         };
         save(s.imagePath(c, f), img);
-        save(s.silhouettePath(c, f), b.maskImage());
+        save(s.silhouettePath(c, f), mask_image(b));
         if (o.range_scans) {
           RangeScanOptions ro;
           ro.noise_sigma = o.scan_noise;

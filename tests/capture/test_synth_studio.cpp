@@ -7,6 +7,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "test_util.h"
+#include "tbsp/io/render_images.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/mocap_io.h"
 #include "tbsp/io/studio.h"
@@ -45,7 +46,7 @@ TEST(SynthStudio, RoundTripsThroughTheStudioFormat) {
       Rasterizer().render(gt, back, b);
       const cv::Mat disk = cv::imread(s.silhouettePath(static_cast<int>(c), f), cv::IMREAD_GRAYSCALE);
       ASSERT_FALSE(disk.empty());
-      const double diff = cv::countNonZero(disk != b.maskImage());
+      const double diff = cv::countNonZero(disk != mask_image(b));
       EXPECT_LE(diff, 0.0005 * disk.total()) << "camera " << c << " frame " << f;
       EXPECT_GT(cv::countNonZero(disk), 2000);
     }

@@ -57,11 +57,11 @@ TEST(TextureErrors, BadInputGivesClearErrors) {
   nm.F.resize(3, 3);
   nm.F << 0, 1, 2, 1, 0, 3, 0, 1, 4;
   EXPECT_NE(error_of(nm, 64, 64, {at(5, 5, 0), at(60, 5, 1), at(5, 60, 2)}).find("non-manifold"), std::string::npos);
-  // Options.
+  // Options: rejected where they are set (the convention of every class, docs/conventions.md)
+  InverseTextureMappingOptions bad_options;
+  bad_options.omega = 0;
   InverseTextureMapping bad;
-  bad.options().omega = 0;
-  bad.setInputMesh(m);
-  bad.setImageSize(64, 64);
-  bad.setConstraints(good);
-  EXPECT_THROW(bad.compute(), InvalidInput);
+  EXPECT_THROW(bad.setOptions(bad_options), InvalidInput);
+  EXPECT_THROW(InverseTextureMapping{bad_options}, InvalidInput);
+  EXPECT_GT(bad.options().omega, 0.0);  // unchanged by the rejected call
 }

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "tbsp/io/render_images.h"
 #include "tbsp/core/error.h"
 #include "tbsp/mesh/primitives.h"
 #include "tbsp/multiview/range_scanner.h"

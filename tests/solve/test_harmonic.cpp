@@ -2,7 +2,7 @@
 
 #include "tbsp/core/error.h"
 #include "tbsp/mesh/primitives.h"
-#include "tbsp/solve/harmonic.h"
+#include "tbsp/mesh/harmonic.h"
 
 using namespace tbsp;
 

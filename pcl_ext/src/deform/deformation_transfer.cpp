@@ -8,19 +8,34 @@
 #include <vector>
 
 #include "tbsp/core/error.h"
+#include "tbsp/core/timer.h"
 #include "tbsp/mesh/point_search.h"
 
 namespace tbsp {
 
+bool DeformationTransferOptions::isValid(std::string* why) const {
+  if (radius >= 0 && std::isfinite(radius)) return true;
+  if (why) *why = "radius = " + std::to_string(radius) + " must be >= 0 and finite (0: 5 % of the tet mesh's diagonal)";
+  return false;
+}
+
+void DeformationTransfer::setOptions(const DeformationTransferOptions& o) {
+  std::string why;
+  if (!o.isValid(&why)) throw InvalidInput("[tbsp::DeformationTransfer::setOptions] " + why);
+  options_ = o;
+}
+
 void DeformationTransfer::precompute(const TetMesh& tets, const Eigen::MatrixX3d& hires, double radius) {
-  const auto t0 = std::chrono::steady_clock::now();
-  require_valid_tet_mesh(tets, "DeformationTransfer::precompute");
-  if (hires.rows() == 0) throw InvalidInput("[DeformationTransfer::precompute] the high-resolution mesh has no vertices");
+  const auto t0 = Clock::now();
+  const std::string who = "[tbsp::DeformationTransfer::precompute] ";
+  require_valid_tet_mesh(tets, "tbsp::DeformationTransfer::precompute");
+  if (hires.rows() == 0) throw InvalidInput(who + "the high-resolution mesh has no vertices");
   for (Eigen::Index i = 0; i < hires.rows(); ++i)
-    if (!hires.row(i).allFinite())
-      throw InvalidInput("[DeformationTransfer::precompute] high-resolution vertex " + std::to_string(i) + " is not finite");
+    if (!hires.row(i).allFinite()) throw InvalidInput(who + "high-resolution vertex " + std::to_string(i) + " is not finite");
+  if (!(radius >= 0 && std::isfinite(radius))) throw InvalidInput(who + "radius must be >= 0 and finite");
   const Eigen::Index m = tets.T.rows(), n = tets.V.rows(), N = hires.rows();
-  radius_ = radius > 0 ? radius : 0.05 * bbox_diagonal(tets.V);
+  const double r_opt = radius > 0 ? radius : options_.radius;
+  const double r_used = r_opt > 0 ? r_opt : 0.05 * bbox_diagonal(tets.V);
   Eigen::MatrixX3d centers(m, 3);
   std::vector<Eigen::Matrix3d> Einv(static_cast<std::size_t>(m));
   for (Eigen::Index j = 0; j < m; ++j) {
@@ -33,13 +48,18 @@ void DeformationTransfer::precompute(const TetMesh& tets, const Eigen::MatrixX3d
   std::vector<std::vector<std::pair<int, double>>> rows(static_cast<std::size_t>(N));
   Eigen::Index fallback = 0;
   double total_tets = 0;
-  const double r = radius_;
+  const double r = r_used;
+  // rows in blocks, progress (and cancellation) between blocks
+  const Eigen::Index block = 65536;
+  for (Eigen::Index b0 = 0; b0 < N; b0 += block) {
+    report_progress(progress_, double(b0) / double(N), "transfer");
+    const Eigen::Index b1 = std::min(N, b0 + block);
 #pragma omp parallel reduction(+ : fallback, total_tets)
   {
     std::vector<std::pair<Eigen::Index, double>> found;
     std::vector<std::pair<int, double>> acc;
 #pragma omp for schedule(dynamic, 256)
-    for (Eigen::Index i = 0; i < N; ++i) {
+    for (Eigen::Index i = b0; i < b1; ++i) {
       const Eigen::Vector3d p = hires.row(i).transpose();
       search.radius(p, r, found);
       if (found.empty()) {
@@ -70,6 +90,8 @@ void DeformationTransfer::precompute(const TetMesh& tets, const Eigen::MatrixX3d
       }
     }
   }
+  }
+  report_progress(progress_, 1.0, "transfer");
   B_.resize(N, n);
   Eigen::VectorXi nnz(N);
   for (Eigen::Index i = 0; i < N; ++i) nnz(i) = int(rows[std::size_t(i)].size());
@@ -77,15 +99,21 @@ void DeformationTransfer::precompute(const TetMesh& tets, const Eigen::MatrixX3d
   for (Eigen::Index i = 0; i < N; ++i)
     for (const auto& [c, v] : rows[std::size_t(i)]) B_.insert(i, c) = v;
   B_.makeCompressed();
+  radius_ = r_used;
   fallback_ = fallback;
   mean_tets_ = total_tets / double(N);
-  t_precompute_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  t_precompute_ = seconds_since(t0);
+  report_.vertices = N;
+  report_.radius = r_used;
+  report_.mean_tets_per_vertex = mean_tets_;
+  report_.fallback_vertices = fallback_;
+  report_.t_precompute = t_precompute_;
 }
 
 Eigen::MatrixX3d DeformationTransfer::apply(const Eigen::MatrixX3d& X) const {
-  if (B_.rows() == 0) throw InvalidInput("[DeformationTransfer::apply] call precompute() first");
+  if (B_.rows() == 0) throw InvalidInput("[tbsp::DeformationTransfer::apply] call precompute() first");
   if (X.rows() != B_.cols())
-    throw InvalidInput("[DeformationTransfer::apply] " + std::to_string(X.rows()) + " positions given, the tet mesh has " +
+    throw InvalidInput("[tbsp::DeformationTransfer::apply] " + std::to_string(X.rows()) + " positions given, the tet mesh has " +
                        std::to_string(B_.cols()) + " vertices");
   Eigen::MatrixX3d out(B_.rows(), 3);
   const int* outer = B_.outerIndexPtr();

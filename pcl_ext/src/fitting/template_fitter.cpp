@@ -10,6 +10,7 @@
 #include <unordered_map>
 
 #include "tbsp/core/error.h"
+#include "tbsp/core/timer.h"
 #include "tbsp/core/logging.h"
 #include "tbsp/deform/laplacian_deformer.h"
 #include "tbsp/deform/rotation_field.h"
@@ -23,13 +24,11 @@
 #include "tbsp/mesh/remeshing.h"
 #include "tbsp/mesh/topology.h"
 #include "tbsp/solve/blas_threads.h"
-#include "tbsp/solve/harmonic.h"
+#include "tbsp/mesh/harmonic.h"
 
 namespace tbsp {
 
 namespace {
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 bool inside(const Eigen::Vector3d& p, const std::vector<Sphere>& s, const std::vector<Box>& b) {
   for (const auto& x : s)
@@ -244,7 +243,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   auto t0 = Clock::now();
   const PointSearch search(P);
   rep.point_spacing = median_spacing(search);
-  rep.t_search = since(t0);
+  rep.t_search = seconds_since(t0);
   t0 = Clock::now();
   bool orient = orient_normals;
   if (N_in.rows() == 0) {
@@ -254,7 +253,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     N.resize(np, 3);
     for (Eigen::Index i = 0; i < np; ++i) N.row(i) = N_in.row(keep[std::size_t(i)]).normalized();
   }
-  rep.t_normals = since(t0);
+  rep.t_normals = seconds_since(t0);
   // ---- derived parameters
   FitParameters& u = rep.used;
   u = params;
@@ -354,7 +353,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   } catch (const InvalidInput& e) {
     throw InvalidInput(who + "the markers cannot pose the template: " + e.what());
   }
-  rep.t_initial = since(t0);
+  rep.t_initial = seconds_since(t0);
   logger()->trace("[TemplateFitting] initial: {:.3f} s: setMesh+laplacian {:.3f}, graph {:.3f}, factorize {:.3f}, rotations {:.3f}, solve {:.3f}",
                   rep.t_initial, D.report().t_laplacian, D.report().t_graph, D.report().t_factorize, D.report().t_rotations, D.report().t_solve);
   t0 = Clock::now();
@@ -398,7 +397,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     }
   }
   rep.scale = lambda;
-  rep.t_scale = since(t0);
+  rep.t_scale = seconds_since(t0);
   if (!D.lastRotations().empty()) D.setRotations(D.lastRotations());  // freeze the field
   Eigen::MatrixX3d V0 = V;
   Eigen::MatrixX3i F = templ.F;
@@ -423,7 +422,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
       const NormalOrientationResult o = orient_normals_consistently(search, N, confidence, u.normal_neighbours);
       rep.normals_flipped_for_consistency = o.flipped;
-      rep.t_normals += since(tc);
+      rep.t_normals += seconds_since(tc);
       logger()->debug("[TemplateFitting] consistent normals: {} pairs, {} components, {} conflicts, {} flipped", o.edges,
                       o.components, o.conflicts, o.flipped);
     }
@@ -565,7 +564,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         matched[std::size_t(j)] = 1;
       }
     }
-    const double t_match_it = since(tm);
+    const double t_match_it = seconds_since(tm);
     const bool used_bins = binned.has_value();
     rep.t_matching += t_match_it;
     const Eigen::Index n_matched = std::count(matched.begin(), matched.end(), 1);
@@ -641,7 +640,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         const Eigen::MatrixX3d T = propagated_targets(V);
         for (Eigen::Index j = 0; j < V.rows(); ++j)
           if (prop_ids[std::size_t(j)] >= 0) D.setPositionTarget(prop_ids[std::size_t(j)], T.row(j).transpose());
-        rep.t_propagation += since(tp);
+        rep.t_propagation += seconds_since(tp);
       }
     } else {
       D.clearConstraints();
@@ -684,11 +683,11 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         }
         // done here (or nothing to propagate: every unmasked vertex matched), not again in stage 3
         propagation_handled = true;
-        rep.t_propagation += since(tp);
+        rep.t_propagation += seconds_since(tp);
       }
     }
     const Eigen::MatrixX3d Vn = D.deform();
-    const double t_solve_it = since(tm);
+    const double t_solve_it = seconds_since(tm);
     rep.t_solve += t_solve_it;
     logger()->trace("[TemplateFitting] it {} solve {:.3f} s: factorize {:.3f}, back-substitution {:.3f}, rotations {:.3f}", it,
                     t_solve_it, D.report().t_factorize, D.report().t_solve, D.report().t_rotations);
@@ -768,7 +767,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         }
         remeshed = true;
       }
-      rep.t_remeshing += since(tm);
+      rep.t_remeshing += seconds_since(tm);
     }
     if (u.fairing && u.fairing_steps > 0) {
       tm = Clock::now();
@@ -815,9 +814,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         }
         V = Vf;
       }
-      rep.t_fairing += since(tm);
+      rep.t_fairing += seconds_since(tm);
     }
-    rep.history.push_back({it, r, n_matched, move, since(t_iter), t_match_it, t_solve_it, used_bins});
+    rep.history.push_back({it, r, n_matched, move, seconds_since(t_iter), t_match_it, t_solve_it, used_bins});
     rep.iterations = it;
     logger()->debug("[TemplateFitting] iteration {}: r={:.4g}, matched {}, max move {:.3g}", it, r, n_matched, move);
     if (stop && !remeshed) {
@@ -828,7 +827,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       break;
     }
   }
-  rep.t_iterations = since(t_it);
+  rep.t_iterations = seconds_since(t_it);
   if (!converged && u.max_iterations > 0) {
     rep.status = FitReport::Status::NotConverged;
     rep.message += "stopped after max_iterations (" + std::to_string(u.max_iterations) + ") before the largest vertex move fell below the tolerance. ";
@@ -878,7 +877,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         V = D.deform();
       }
     }
-    rep.t_propagation = since(t0);
+    rep.t_propagation = seconds_since(t0);
   }
 
   // ---- detail rounds (beyond the thesis; FitParameters::detail_rounds): §5.5.1's Laplacian
@@ -1030,7 +1029,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
       rep.detail_points_tracked = Eigen::Index(rk.size());
       logger()->trace("[TemplateFitting] detail round {}: set-up {:.3f} s ({} data -> surface constraints, {} points tracked)",
-                      round + 1, since(t_round), rep.detail_surface_constraints, rk.size());
+                      round + 1, seconds_since(t_round), rep.detail_surface_constraints, rk.size());
       int k = 0;
       for (; k < u.detail_iterations; ++k) {
         const Eigen::MatrixX3d VN = vertex_normals(V, F);
@@ -1112,7 +1111,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
       rep.detail_iterations_run += k;
     }
-    rep.t_detail = since(t0);
+    rep.t_detail = seconds_since(t0);
   }
 
   // ---- fold repair (with fairing, §5.5.3): edges whose faces are bent back by more than 120°
@@ -1196,7 +1195,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       const UntangleResult ur = untangle_local_folds(V, F, 0, 20, 1);
       rep.untangled_vertices += ur.vertices_moved;
     }
-    rep.t_fairing += since(t0);
+    rep.t_fairing += seconds_since(t0);
   };
 
   auto fold_repair = [&]() {
@@ -1220,7 +1219,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         rep.untangled_vertices += ur.vertices_moved;
         if (ur.vertices_moved == 0 || folded_edges(V, nullptr) == 0) break;  // else: repair the edges it bent
       }
-      rep.t_fairing += since(t0);
+      rep.t_fairing += seconds_since(t0);
     }
   };
   fold_repair();
@@ -1257,7 +1256,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     } catch (const InvalidInput&) {
       // not a manifold mesh (a template accepted as is): reported as -1 below
     }
-    rep.t_fairing += since(t0);
+    rep.t_fairing += seconds_since(t0);
   }
   // ---- metrics (cloud ROI -> result)
   report_progress(progress, 0.95, "metrics");
@@ -1297,7 +1296,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     if (rep.self_intersections > 0)
       rep.message += std::to_string(rep.self_intersections) + " pairs of faces of the result intersect each other. ";
   }
-  rep.t_metrics = since(t0);
+  rep.t_metrics = seconds_since(t0);
   rep.vertices = V.rows();
   rep.faces = F.rows();
   Eigen::Index active = 0;
@@ -1312,7 +1311,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   result.F = F;
   result.N.resize(0, 3);
   result.C.resize(0, 3);
-  rep.t_total = since(t_all);
+  rep.t_total = seconds_since(t_all);
   report_progress(progress, 1.0, "done");
   return rep;
 }

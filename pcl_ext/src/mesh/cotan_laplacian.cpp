@@ -103,6 +103,17 @@ Eigen::SparseMatrix<double> cotangent_matrix(const Eigen::MatrixX3d& V, const Ei
   return C;
 }
 
+Eigen::MatrixX3d face_cotangents(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
+  const double delta = kMollifyMargin * mean_edge_length(V, F);
+  Eigen::MatrixX3d C(F.rows(), 3);
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    const Eigen::Vector3d p[3] = {V.row(F(f, 0)), V.row(F(f, 1)), V.row(F(f, 2))};
+    const FaceGeometry g = face_geometry(p, delta);
+    C.row(f) << g.cot[0], g.cot[1], g.cot[2];
+  }
+  return C;
+}
+
 Eigen::VectorXd voronoi_areas(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
   const double delta = kMollifyMargin * mean_edge_length(V, F);
   Eigen::VectorXd A = Eigen::VectorXd::Zero(V.rows());

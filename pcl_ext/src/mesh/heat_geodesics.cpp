@@ -35,10 +35,11 @@ int find_root(std::vector<int>& p, int i) {
 HeatGeodesics::HeatGeodesics(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const HeatGeodesicsOptions& options)
     : impl_(std::make_unique<Impl>()) {
   const Eigen::Index n = V.rows();
-  if (n == 0 || F.rows() == 0) throw InvalidInput("[HeatGeodesics] empty mesh: give at least one triangle");
-  if (!V.allFinite()) throw InvalidInput("[HeatGeodesics] the mesh has non-finite vertex coordinates");
-  if (F.minCoeff() < 0 || F.maxCoeff() >= n) throw InvalidInput("[HeatGeodesics] a triangle index is out of range [0, " + std::to_string(n) + ")");
-  if (!(options.time_factor > 0) || !(options.time >= 0)) throw InvalidInput("[HeatGeodesics] time_factor must be > 0 and time >= 0");
+  if (n == 0 || F.rows() == 0) throw InvalidInput("[tbsp::HeatGeodesics] empty mesh: give at least one triangle");
+  if (!V.allFinite()) throw InvalidInput("[tbsp::HeatGeodesics] the mesh has non-finite vertex coordinates");
+  if (F.minCoeff() < 0 || F.maxCoeff() >= n) throw InvalidInput("[tbsp::HeatGeodesics] a triangle index is out of range [0, " + std::to_string(n) + ")");
+  std::string why;
+  if (!options.isValid(&why)) throw InvalidInput("[tbsp::HeatGeodesics] " + why);
   Impl& d = *impl_;
   d.V = V;
   d.F = F;
@@ -53,15 +54,11 @@ HeatGeodesics::HeatGeodesics(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
     const double a2 = nrm.norm();
     d.area(f) = 0.5 * a2;
     d.normal.row(f) = a2 > 0 ? Eigen::Vector3d(nrm / a2) : Eigen::Vector3d::Zero();
-    for (int c = 0; c < 3; ++c) {
-      const Eigen::Vector3d a = p[(c + 1) % 3] - p[c], b = p[(c + 2) % 3] - p[c];
-      const double s = std::max(a.cross(b).norm(), 1e-12 * a.norm() * b.norm());
-      d.cot(f, c) = std::clamp(a.dot(b) / s, -kMaxCotangent, kMaxCotangent);
-      sum_len += a.norm();
-    }
+    for (int c = 0; c < 3; ++c) sum_len += (p[(c + 1) % 3] - p[c]).norm();
   }
+  d.cot = face_cotangents(V, F);  // the Laplacian's own (mollified) cotangents
   d.h = sum_len / (3.0 * nf);
-  if (!(d.h > 0)) throw InvalidInput("[HeatGeodesics] all edges have zero length");
+  if (!(d.h > 0)) throw InvalidInput("[tbsp::HeatGeodesics] all edges have zero length");
 
   // Components (union-find over triangles).
   std::vector<int> parent(n);
@@ -98,12 +95,21 @@ HeatGeodesics::HeatGeodesics(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
   for (Eigen::Index i = 0; i < n; ++i) mt.emplace_back(i, i, d.mass(i));
   M.setFromTriplets(mt.begin(), mt.end());
   const double t = options.time > 0 ? options.time : options.time_factor * d.h * d.h;
+  report_progress(options.progress, 0.2, "heat geodesics: factorize");
   d.heat.compute(Eigen::SparseMatrix<double>(M + t * K));
+  report_progress(options.progress, 0.6, "heat geodesics: factorize");
   // K is singular (constants per component); a tiny mass shift makes it definite. The
   // right-hand sides are projected to zero mean per component, so the shift changes φ by a
   // negligible amount (relative 1e-10) and only by a constant that is removed afterwards.
   const double eps = 1e-10 * K.diagonal().sum() / M.diagonal().sum();
   d.poisson.compute(Eigen::SparseMatrix<double>(K + eps * M));
+  report_progress(options.progress, 1.0, "heat geodesics: factorize");
+}
+
+bool HeatGeodesicsOptions::isValid(std::string* why) const {
+  if (time_factor > 0 && std::isfinite(time_factor) && time >= 0 && std::isfinite(time)) return true;
+  if (why) *why = "time_factor must be > 0 and time >= 0 (both finite)";
+  return false;
 }
 
 HeatGeodesics::~HeatGeodesics() = default;
@@ -128,15 +134,15 @@ Eigen::MatrixXd HeatGeodesics::distances(const std::vector<WeightedSource>& sour
   std::vector<int> comp(k, -1);
   for (int s = 0; s < k; ++s) {
     double wsum = 0;
-    if (sources[s].empty()) throw InvalidInput("[HeatGeodesics] source " + std::to_string(s) + " has no vertex");
+    if (sources[s].empty()) throw InvalidInput("[tbsp::HeatGeodesics] source " + std::to_string(s) + " has no vertex");
     for (const auto& [v, w] : sources[s]) {
-      if (v < 0 || v >= n) throw InvalidInput("[HeatGeodesics] source " + std::to_string(s) + ": vertex " + std::to_string(v) + " is out of range [0, " + std::to_string(n) + ")");
-      if (d.component[v] < 0) throw InvalidInput("[HeatGeodesics] source " + std::to_string(s) + ": vertex " + std::to_string(v) + " is in no triangle");
+      if (v < 0 || v >= n) throw InvalidInput("[tbsp::HeatGeodesics] source " + std::to_string(s) + ": vertex " + std::to_string(v) + " is out of range [0, " + std::to_string(n) + ")");
+      if (d.component[v] < 0) throw InvalidInput("[tbsp::HeatGeodesics] source " + std::to_string(s) + ": vertex " + std::to_string(v) + " is in no triangle");
       B(v, s) += w;
       wsum += w;
       if (w > 0) comp[s] = d.component[v];
     }
-    if (!(wsum > 0)) throw InvalidInput("[HeatGeodesics] source " + std::to_string(s) + ": the weights must sum to a positive number");
+    if (!(wsum > 0)) throw InvalidInput("[tbsp::HeatGeodesics] source " + std::to_string(s) + ": the weights must sum to a positive number");
   }
   const Eigen::MatrixXd U = d.heat.solve(B);
 

@@ -171,11 +171,11 @@ void require_valid_tet_mesh(const TetMesh& mesh, const std::string& who) {
 
 TetMesh surface_to_tets(const TriMesh& surface, double offset) {
   const Eigen::Index nv = surface.V.rows(), nf = surface.F.rows();
-  if (nv == 0 || nf == 0) throw InvalidInput("[surface_to_tets] the surface is empty");
+  if (nv == 0 || nf == 0) throw InvalidInput("[tbsp::surface_to_tets] the surface is empty");
   for (Eigen::Index f = 0; f < nf; ++f)
     for (int k = 0; k < 3; ++k)
       if (surface.F(f, k) < 0 || surface.F(f, k) >= nv)
-        throw InvalidInput("[surface_to_tets] face " + std::to_string(f) + " refers to vertex " +
+        throw InvalidInput("[tbsp::surface_to_tets] face " + std::to_string(f) + " refers to vertex " +
                            std::to_string(surface.F(f, k)) + " of " + std::to_string(nv));
   if (!(offset > 0)) {
     double sum = 0;

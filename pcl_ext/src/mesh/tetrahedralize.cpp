@@ -45,7 +45,7 @@ SM to_surface_mesh(const TriMesh& m) {
   for (Eigen::Index f = 0; f < m.F.rows(); ++f) {
     const auto fi = sm.add_face(vi[std::size_t(m.F(f, 0))], vi[std::size_t(m.F(f, 1))], vi[std::size_t(m.F(f, 2))]);
     if (fi == SM::null_face())
-      throw InvalidInput("[decimate_mesh] face " + std::to_string(f) +
+      throw InvalidInput("[tbsp::decimate_mesh] face " + std::to_string(f) +
                          " cannot be added to a halfedge structure (non-manifold or inconsistently oriented there); "
                          "repair the mesh first");
   }
@@ -108,21 +108,21 @@ struct TempDir {
 TetMesh read_tetgen_output(const fs::path& node, const fs::path& ele) {
   TetMesh out;
   std::ifstream n(node), e(ele);
-  if (!n || !e) throw Error("[tetrahedralize] TetGen produced no " + node.filename().string() + " / " + ele.filename().string());
+  if (!n || !e) throw Error("[tbsp::tetrahedralize] TetGen produced no " + node.filename().string() + " / " + ele.filename().string());
   long long nv = 0, dim = 0, na = 0, nb = 0;
   n >> nv >> dim >> na >> nb;
-  if (!n || nv <= 0 || dim != 3) throw Error("[tetrahedralize] cannot parse TetGen's node file " + node.string());
+  if (!n || nv <= 0 || dim != 3) throw Error("[tbsp::tetrahedralize] cannot parse TetGen's node file " + node.string());
   out.V.resize(nv, 3);
   for (long long i = 0; i < nv; ++i) {
     long long id;
     n >> id >> out.V(i, 0) >> out.V(i, 1) >> out.V(i, 2);
     double skip;
     for (long long k = 0; k < na + nb; ++k) n >> skip;
-    if (!n || id != i) throw Error("[tetrahedralize] TetGen's node file is truncated at node " + std::to_string(i));
+    if (!n || id != i) throw Error("[tbsp::tetrahedralize] TetGen's node file is truncated at node " + std::to_string(i));
   }
   long long nt = 0, npt = 0, nr = 0;
   e >> nt >> npt >> nr;
-  if (!e || nt <= 0 || npt < 4) throw Error("[tetrahedralize] cannot parse TetGen's element file " + ele.string());
+  if (!e || nt <= 0 || npt < 4) throw Error("[tbsp::tetrahedralize] cannot parse TetGen's element file " + ele.string());
   out.T.resize(nt, 4);
   for (long long i = 0; i < nt; ++i) {
     long long id;
@@ -134,29 +134,55 @@ TetMesh read_tetgen_output(const fs::path& node, const fs::path& ele) {
     }
     double skip;
     for (long long k = 0; k < nr; ++k) e >> skip;
-    if (!e || id != i) throw Error("[tetrahedralize] TetGen's element file is truncated at element " + std::to_string(i));
+    if (!e || id != i) throw Error("[tbsp::tetrahedralize] TetGen's element file is truncated at element " + std::to_string(i));
   }
   return out;
 }
 
 }  // namespace
 
-TriMesh decimate_mesh(const TriMesh& mesh, Eigen::Index target_faces) {
-  if (target_faces < 4) throw InvalidInput("[decimate_mesh] the target face count must be at least 4, got " + std::to_string(target_faces));
+namespace {
+// Stops the edge collapses at a target edge count, reporting progress on the way; a progress
+// callback returning false stops them at once (the caller then throws Cancelled).
+struct ProgressStop {
+  std::size_t target_edges;
+  const ProgressCallback* progress;
+  mutable bool cancelled = false;
+  mutable double next_report = 0.0;
+  template <class FT, class Profile>
+  bool operator()(const FT&, const Profile&, std::size_t initial, std::size_t current) const {
+    if (current <= target_edges) return true;
+    if (progress && *progress && initial > target_edges) {
+      const double f = double(initial - current) / double(initial - target_edges);
+      if (f >= next_report) {
+        next_report = f + 0.01;
+        if (!(*progress)(f, "decimate")) cancelled = true;
+      }
+    }
+    return cancelled;
+  }
+};
+}  // namespace
+
+TriMesh decimate_mesh(const TriMesh& mesh, Eigen::Index target_faces, const ProgressCallback& progress) {
+  if (target_faces < 4)
+    throw InvalidInput("[tbsp::decimate_mesh] the target face count must be at least 4, got " + std::to_string(target_faces));
   MeshRequirements req;
   req.allow_nonmanifold = false;
   req.allow_degenerate = true;
   req.allow_inconsistent_orientation = false;
-  require_valid_mesh(mesh, req, "decimate_mesh");
+  require_valid_mesh(mesh, req, "tbsp::decimate_mesh");
   if (mesh.F.rows() <= target_faces) return mesh;
   SM sm = to_surface_mesh(mesh);
   // An edge collapse removes two faces on a closed surface; stop on the edge count
   // (#E = 3/2 #F on a closed mesh).
-  SMS::Count_stop_predicate<SM> stop(std::size_t(target_faces) * 3 / 2);
+  const ProgressStop stop{std::size_t(target_faces) * 3 / 2, &progress};
   using GH = SMS::GarlandHeckbert_plane_policies<SM, K>;
   GH gh(sm);
   SMS::Bounded_normal_change_placement<GH::Get_placement> placement(gh.get_placement());
   SMS::edge_collapse(sm, stop, CGAL::parameters::get_cost(gh.get_cost()).get_placement(placement));
+  if (stop.cancelled) throw Cancelled("[tbsp::decimate_mesh] cancelled by the progress callback");
+  report_progress(progress, 1.0, "decimate");
   TriMesh out = from_surface_mesh(sm);
   logger()->debug("decimate_mesh: {} -> {} faces", mesh.F.rows(), out.F.rows());
   return out;
@@ -171,7 +197,7 @@ TetMesh tetrahedralize(const TriMesh& surface, const TetgenOptions& options) {
   req.allow_inconsistent_orientation = false;
   const MeshReport rep = require_valid_mesh(surface, req, "tetrahedralize");
   if (!rep.isolated_vertices.empty())
-    throw InvalidInput("[tetrahedralize] " + std::to_string(rep.isolated_vertices.size()) +
+    throw InvalidInput("[tbsp::tetrahedralize] " + std::to_string(rep.isolated_vertices.size()) +
                        " isolated vertices (e.g. vertex " + std::to_string(rep.isolated_vertices[0]) +
                        ") would become interior points; remove unreferenced vertices first");
 
@@ -187,17 +213,18 @@ TetMesh tetrahedralize(const TriMesh& surface, const TetgenOptions& options) {
     for (Eigen::Index f = 0; f < surface.F.rows(); ++f)
       os << "3 " << surface.F(f, 0) << ' ' << surface.F(f, 1) << ' ' << surface.F(f, 2) << '\n';
     os << "0\n0\n";
-    if (!os) throw Error("[tetrahedralize] cannot write the temporary file " + in.string());
+    if (!os) throw Error("[tbsp::tetrahedralize] cannot write the temporary file " + in.string());
   }
   // Self-intersection check first (TetGen -d): the meshing run itself may abort or silently
   // produce a tetrahedralization of the overlapping volume on such input.
   {
     const std::string dcmd = "cd '" + dir.path.string() + "' && '" + options.tetgen_program +
                              "' -dz surface.smesh > check.log 2>&1";
+    report_progress(options.progress, 0.0, "tetgen");
     const int drc = std::system(dcmd.c_str());
     const std::string dtext = read_all(dir.path / "check.log");
     if (drc != 0 && (dtext.find("not found") != std::string::npos || (WIFEXITED(drc) && WEXITSTATUS(drc) == 127)))
-      throw Error("[tetrahedralize] cannot run '" + options.tetgen_program +
+      throw Error("[tbsp::tetrahedralize] cannot run '" + options.tetgen_program +
                   "': install the Debian package `tetgen` (scripts/deps does) or set TetgenOptions::tetgen_program");
     const auto found = dtext.find("!! Found");
     if (found != std::string::npos) {
@@ -212,7 +239,7 @@ TetMesh tetrahedralize(const TriMesh& surface, const TetgenOptions& options) {
           if (c == '\n') c = ' ';
         example = "; e.g. " + example;
       }
-      throw InvalidInput("[tetrahedralize] the surface self-intersects (TetGen -d: " + summary + example +
+      throw InvalidInput("[tbsp::tetrahedralize] the surface self-intersects (TetGen -d: " + summary + example +
                          ", zero-based vertex indices). Repair the surface, or use surface_to_tets() for deformation transfer");
     }
   }
@@ -227,15 +254,16 @@ TetMesh tetrahedralize(const TriMesh& surface, const TetgenOptions& options) {
   const fs::path log = dir.path / "tetgen.log";
   const std::string cmd = "cd '" + dir.path.string() + "' && '" + options.tetgen_program + "' " + sw.str() +
                           " surface.smesh > tetgen.log 2>&1";
+  report_progress(options.progress, 0.3, "tetgen");
   const int rc = std::system(cmd.c_str());
   const std::string text = read_all(log);
   if (rc != 0) {
     if (text.find("not found") != std::string::npos || (WIFEXITED(rc) && WEXITSTATUS(rc) == 127))
-      throw Error("[tetrahedralize] cannot run '" + options.tetgen_program +
+      throw Error("[tbsp::tetrahedralize] cannot run '" + options.tetgen_program +
                   "': install the Debian package `tetgen` (scripts/deps does) or set TetgenOptions::tetgen_program");
     std::string reason = last_lines(text, 4);
     if (text.find("intersect") != std::string::npos) reason = "the surface self-intersects; TetGen says: " + reason;
-    throw Error("[tetrahedralize] TetGen " + sw.str() + " failed on a surface of " + std::to_string(surface.V.rows()) +
+    throw Error("[tbsp::tetrahedralize] TetGen " + sw.str() + " failed on a surface of " + std::to_string(surface.V.rows()) +
                 " vertices / " + std::to_string(surface.F.rows()) + " faces: " + reason +
                 ". Repair the surface (remove self-intersections) or use surface_to_tets()");
   }
@@ -246,6 +274,7 @@ TetMesh tetrahedralize(const TriMesh& surface, const TetgenOptions& options) {
     logger()->warn("tetrahedralize: TetGen reordered the input vertices");
   logger()->debug("tetrahedralize: {} surface vertices -> {} vertices, {} tets ({})", surface.V.rows(), out.V.rows(),
                   out.T.rows(), sw.str());
+  report_progress(options.progress, 1.0, "tetgen");
   return out;
 }
 
@@ -257,13 +286,13 @@ TetMesh tetrahedralize_to_size(const TriMesh& surface, Eigen::Index target_tets,
   }
   double ratio = 2.2;
   Eigen::Index faces = std::max<Eigen::Index>(8, Eigen::Index(double(target_tets) / ratio));
-  TriMesh dec = decimate_mesh(surface, faces);
+  TriMesh dec = decimate_mesh(surface, faces, options.progress);
   TetMesh tets = tetrahedralize(dec, options);
   const double miss = double(tets.T.rows()) / double(target_tets);
   if (miss < 0.7 || miss > 1.3) {
     ratio = double(tets.T.rows()) / double(dec.F.rows());
     faces = std::max<Eigen::Index>(8, Eigen::Index(double(target_tets) / ratio));
-    dec = decimate_mesh(surface, faces);
+    dec = decimate_mesh(surface, faces, options.progress);
     tets = tetrahedralize(dec, options);
   }
   if (decimated_surface) *decimated_surface = dec;

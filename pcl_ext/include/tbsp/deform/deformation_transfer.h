@@ -21,16 +21,50 @@
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <memory>
+#include <string>
 
+#include "tbsp/core/progress.h"
 #include "tbsp/mesh/tet_mesh.h"
 
 namespace tbsp {
 
+/// Options of DeformationTransfer (docs/conventions.md).
+struct DeformationTransferOptions {
+  /// Wendland support radius r (model units); 0 = 5 % of the tet mesh's bounding-box diagonal
+  /// (the thesis' value). Range ≥ 0, finite. Default 0.
+  double radius = 0.0;
+  /// True when every field is in range; else false and, if given, `why` says which and why.
+  bool isValid(std::string* why = nullptr) const;
+};
+
+/// What the last precompute() did.
+struct DeformationTransferReport {
+  Eigen::Index vertices = 0;        ///< high-resolution vertices (rows of B)
+  double radius = 0;                ///< r used (model units)
+  double mean_tets_per_vertex = 0;  ///< tetrahedra blended per vertex, mean
+  Eigen::Index fallback_vertices = 0;  ///< vertices without a tet within r (nearest tet used)
+  double t_precompute = 0;          ///< seconds
+};
+
 class DeformationTransfer {
 public:
+  using Ptr = std::shared_ptr<DeformationTransfer>;
+  using ConstPtr = std::shared_ptr<const DeformationTransfer>;
+  using Options = DeformationTransferOptions;
+
+  /// \throws InvalidInput when !o.isValid().
+  void setOptions(const DeformationTransferOptions& o);
+  const DeformationTransferOptions& options() const { return options_; }
+  /// Progress of precompute() (stage "transfer"); returning false cancels (tbsp::Cancelled).
+  void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
+  const DeformationTransferReport& report() const { return report_; }
+
   /// \brief Builds B for the high-resolution vertices `hires` (#N by 3) against the rest tet
-  /// mesh. `radius` ≤ 0 means 5 % of the tet mesh's bounding-box diagonal (the thesis' value).
-  /// \throws InvalidInput for an invalid tet mesh, an empty or non-finite `hires`.
+  /// mesh. `radius` > 0 overrides options().radius for this call; 0 uses the options (whose 0
+  /// means 5 % of the tet mesh's bounding-box diagonal). On failure B is left as it was.
+  /// \throws InvalidInput for an invalid tet mesh, an empty or non-finite `hires`, a negative
+  /// radius; Cancelled when the progress callback returns false.
   void precompute(const TetMesh& tets, const Eigen::MatrixX3d& hires, double radius = 0.0);
 
   /// \brief V' = B X for deformed tet-vertex positions X (#tet vertices by 3).
@@ -46,6 +80,9 @@ public:
   double precomputeSeconds() const { return t_precompute_; }
 
 private:
+  DeformationTransferOptions options_;
+  ProgressCallback progress_;
+  DeformationTransferReport report_;
   Eigen::SparseMatrix<double, Eigen::RowMajor> B_;
   double radius_ = 0, mean_tets_ = 0, t_precompute_ = 0;
   Eigen::Index fallback_ = 0;

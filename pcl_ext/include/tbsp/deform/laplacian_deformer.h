@@ -109,8 +109,28 @@ struct DeformReport {
   std::vector<ConstraintResidual> residuals;
 };
 
+/// Options of LaplacianDeformer (docs/conventions.md). Each also has its own setter below.
+struct LaplacianDeformerOptions {
+  /// Edge weights of L̂ (eq. 3.2). Default cotangent. Changing them recomputes L̂.
+  LaplacianWeights weights = LaplacianWeights::Cotangent;
+  /// The automatic rotation field of §3.2.3 (eq. 3.12). Default off.
+  bool rotation_field = false;
+  /// Global scale λ of the differential coordinates (§5.2); > 0, finite. Default 1.
+  double scale = 1.0;
+  /// Anchor ε ≥ 0 towards the rest positions (see setAnchor). Default 0 = off.
+  double anchor = 0.0;
+  /// Sliver guard ≥ 0 of the cotangent Laplacian (see setSliverGuard). Default 0 = off.
+  double sliver_guard = 0.0;
+  /// True when every field is in range; else false and, if given, `why` says which and why.
+  bool isValid(std::string* why = nullptr) const;
+};
+
 class LaplacianDeformer {
 public:
+  using Ptr = std::shared_ptr<LaplacianDeformer>;
+  using ConstPtr = std::shared_ptr<const LaplacianDeformer>;
+  using Options = LaplacianDeformerOptions;
+
   LaplacianDeformer();
   ~LaplacianDeformer();
   LaplacianDeformer(const LaplacianDeformer&) = delete;
@@ -120,6 +140,10 @@ public:
   /// factorization is dropped. \throws InvalidInput (see class doc for what is rejected).
   void setMesh(const TriMesh& mesh);
   const TriMesh& mesh() const;
+
+  /// \brief All options at once. \throws InvalidInput when !o.isValid() (nothing clamped).
+  void setOptions(const LaplacianDeformerOptions& o);
+  LaplacianDeformerOptions options() const;
 
   /// Laplacian weights (default cotangent). Changing them refactorizes.
   void setLaplacianWeights(LaplacianWeights w);

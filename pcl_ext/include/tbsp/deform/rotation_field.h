@@ -17,7 +17,7 @@
 
 #include "tbsp/core/progress.h"
 #include "tbsp/mesh/cotan_laplacian.h"
-#include "tbsp/solve/harmonic.h"
+#include "tbsp/mesh/harmonic.h"
 
 namespace tbsp {
 

@@ -77,12 +77,18 @@ struct RigidMotion {
   Eigen::Vector3d apply(const Eigen::Vector3d& x) const { return center + R() * (x - center) + translation; }
 };
 
+/// Options of TetDeformer (docs/conventions.md: one options struct per class, validated).
 struct TetDeformerOptions {
-  bool rotation_interpolation = true;  ///< step (III)
-  double max_handle_step_deg = 45.0;   ///< largest handle rotation applied per iteration
+  /// step (III), incremental rotation interpolation over the tet dual graph (twists > 180°).
+  /// Default true.
+  bool rotation_interpolation = true;
+  /// Largest handle rotation applied per iteration, degrees; range (0, 180). Default 45.
+  double max_handle_step_deg = 45.0;
   /// Convergence: stop when no vertex moved more than tolerance × bbox diagonal in an iteration
-  /// (and all handles have reached their targets).
+  /// (and all handles have reached their targets). Range > 0. Default 1e-7.
   double tolerance = 1e-7;
+  /// True when every field is in range; else false and, if given, `why` says which and why.
+  bool isValid(std::string* why = nullptr) const;
 };
 
 /// \brief Sizes, timings (seconds; per-step times are summed over the iterations) and the
@@ -124,7 +130,12 @@ public:
   /// Number of tets of the mesh given to setMesh.
   Eigen::Index numInputTets() const { return n_input_tets_; }
 
-  void setOptions(const TetDeformerOptions& o) { options_ = o; }
+  using Ptr = std::shared_ptr<TetDeformer>;
+  using ConstPtr = std::shared_ptr<const TetDeformer>;
+  using Options = TetDeformerOptions;
+
+  /// \throws InvalidInput when !o.isValid() (nothing is clamped silently).
+  void setOptions(const TetDeformerOptions& o);
   const TetDeformerOptions& options() const { return options_; }
 
   /// \brief Per-tet stiffness s_j > 0 (eq. 7.9–7.10), one per input tet; tets created by

@@ -49,6 +49,8 @@
 /// for the geodesics, O(#V log #nodes) for the matching.
 
 #include <Eigen/Core>
+#include <memory>
+#include <string>
 #include <cstdint>
 #include <vector>
 
@@ -91,7 +93,11 @@ struct InverseTextureMappingOptions {
   /// fields surface_*, mesh_to_surface_*): two closest-point passes, ~20 % of a 65k-pixel run.
   bool surface_fit_report = false;
   double normal_offset = 0.0;      ///< draping (§4.4): targets moved along the mesh normals (mesh units)
-  ProgressCallback progress;
+  ProgressCallback progress;       ///< (set with InverseTextureMapping::setProgressCallback)
+  /// True when omega > 0, sigma >= 0, epsilon_factor > 0, 0 < ratio_low < ratio_high,
+  /// max_solve_nodes and max_geodesic_nodes >= 16, heat_time_factor > 0, local_channels >= 0 and
+  /// normal_offset is finite; else false and, if given, `why` says which.
+  bool isValid(std::string* why = nullptr) const;
 };
 
 /// Per-vertex outcome.
@@ -141,7 +147,20 @@ struct TextureMappingResult {
 
 class InverseTextureMapping {
 public:
-  explicit InverseTextureMapping(const InverseTextureMappingOptions& options = {}) : options_(options) {}
+  using Ptr = std::shared_ptr<InverseTextureMapping>;
+  using ConstPtr = std::shared_ptr<const InverseTextureMapping>;
+  using Options = InverseTextureMappingOptions;
+
+  /// \throws InvalidInput when !options.isValid().
+  explicit InverseTextureMapping(const InverseTextureMappingOptions& options = {}) { setOptions(options); }
+  /// \throws InvalidInput when !o.isValid() (nothing is clamped).
+  void setOptions(const InverseTextureMappingOptions& o);
+  const InverseTextureMappingOptions& options() const { return options_; }
+  /// Progress of compute() (stages: deform 1, geodesics, matching, deform 2); returning false
+  /// cancels (tbsp::Cancelled).
+  void setProgressCallback(ProgressCallback cb) { options_.progress = std::move(cb); }
+  /// The report of the last successful compute() (also in its result).
+  const TextureMappingReport& report() const { return last_report_; }
 
   void setInputMesh(const TriMesh& mesh) { mesh_ = mesh; }
   /// Image size in pixels (width ≥ 2, height ≥ 2).
@@ -152,13 +171,13 @@ public:
   /// Optional sewing-pattern mask, row-major width·height, non-zero = pattern pixel. Empty = whole image.
   void setMask(const std::vector<std::uint8_t>& mask) { mask_ = mask; }
   void setConstraints(const std::vector<TextureConstraint>& constraints) { constraints_ = constraints; }
-  InverseTextureMappingOptions& options() { return options_; }
 
   /// Runs the five stages. \throws InvalidInput (see file doc), Cancelled from the progress callback.
   TextureMappingResult compute() const;
 
 private:
   InverseTextureMappingOptions options_;
+  mutable TextureMappingReport last_report_;
   TriMesh mesh_;
   int width_ = 0, height_ = 0;
   std::vector<std::uint8_t> mask_;

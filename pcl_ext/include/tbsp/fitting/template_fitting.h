@@ -38,6 +38,7 @@ public:
   using Ptr = std::shared_ptr<TemplateFitting<PointT>>;
   using ConstPtr = std::shared_ptr<const TemplateFitting<PointT>>;
   using PointCloud = pcl::PointCloud<PointT>;
+  using Options = FitParameters;
   using pcl::PCLBase<PointT>::input_;
   using pcl::PCLBase<PointT>::indices_;
 
@@ -55,6 +56,9 @@ public:
   /// \throws InvalidInput when !p.isValid().
   void setParameters(const FitParameters& p);
   const FitParameters& getParameters() const { return params_; }
+  /// The same under the names every tbsp class uses (docs/conventions.md).
+  void setOptions(const FitParameters& p) { setParameters(p); }
+  const FitParameters& options() const { return params_; }
   void setMaxMatchDistance(double r) { FitParameters p = params_; p.max_match_distance = r; setParameters(p); }
   void setMaxNormalAngle(double deg) { FitParameters p = params_; p.max_normal_angle_deg = deg; setParameters(p); }
 
@@ -66,6 +70,9 @@ public:
   FitReport reconstruct(TriMesh& output);
   FitReport reconstruct(pcl::PolygonMesh& output);
 
+  /// The report of the last successful reconstruct() (also its return value).
+  const FitReport& report() const { return report_; }
+
   /// Per output vertex: matched / propagated / masked / unmatched (last reconstruct()).
   const std::vector<VertexStatus>& getVertexStatus() const { return status_; }
 
@@ -76,6 +83,7 @@ private:
   RegionOfInterest roi_;
   ProgressCallback progress_;
   std::vector<VertexStatus> status_;
+  FitReport report_;
 };
 
 }  // namespace tbsp

@@ -36,6 +36,11 @@ constexpr double kMaxCotangent = 1e4;
 /// edges contribute their single angle. O(#F).
 Eigen::SparseMatrix<double> cotangent_matrix(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F);
 
+/// \brief Cotangent of the angle at every corner (#F by 3: column c is the corner F(f, c)),
+/// robust as cotangent_matrix (mollified degenerate faces, clamped). Used by the operators that
+/// need per-face gradients (heat geodesics). O(#F).
+Eigen::MatrixX3d face_cotangents(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F);
+
 /// \brief Mixed Voronoi vertex areas (Meyer et al. 2002), #V: Voronoi region inside
 /// non-obtuse triangles, half/quarter of the triangle area for obtuse ones (Fig. 3.2). The areas
 /// of all vertices sum to the surface area. Isolated vertices get 0. O(#F).

@@ -17,10 +17,13 @@
 /// geodesics (use CGAL Surface_mesh_shortest_path when exactness matters).
 
 #include <Eigen/Core>
+#include <string>
 #include <Eigen/SparseCore>
 #include <memory>
 #include <utility>
 #include <vector>
+
+#include "tbsp/core/progress.h"
 
 namespace tbsp {
 
@@ -29,10 +32,15 @@ namespace tbsp {
 using WeightedSource = std::vector<std::pair<int, double>>;
 
 struct HeatGeodesicsOptions {
-  double time_factor = 1.0;  ///< t = time_factor · (mean edge length)²
+  double time_factor = 1.0;  ///< t = time_factor · (mean edge length)²; > 0. Default 1.
   /// > 0: this heat time t (squared length units) instead — to compare distance fields of two
-  /// surfaces with the same smoothing, give both the same t.
+  /// surfaces with the same smoothing, give both the same t. ≥ 0. Default 0 = off.
   double time = 0.0;
+  /// Progress of the set-up (stage "heat geodesics: factorize"); returning false cancels
+  /// (tbsp::Cancelled).
+  ProgressCallback progress;
+  /// True when every field is in range; else false and, if given, `why` says which.
+  bool isValid(std::string* why = nullptr) const;
 };
 
 class HeatGeodesics {

@@ -11,6 +11,7 @@
 
 #include <string>
 
+#include "tbsp/core/progress.h"
 #include "tbsp/mesh/tet_mesh.h"
 #include "tbsp/mesh/tri_mesh.h"
 
@@ -21,7 +22,9 @@ namespace tbsp {
 /// the input unchanged when it already has ≤ target_faces faces.
 /// O(#F log #F). \throws InvalidInput for non-manifold, empty or degenerate input, or
 /// target_faces < 4.
-TriMesh decimate_mesh(const TriMesh& mesh, Eigen::Index target_faces);
+/// \param progress called with the fraction of the collapses done (stage "decimate"); returning
+/// false cancels (tbsp::Cancelled; the input is untouched, nothing is returned).
+TriMesh decimate_mesh(const TriMesh& mesh, Eigen::Index target_faces, const ProgressCallback& progress = {});
 
 struct TetgenOptions {
   /// Radius-edge ratio bound (TetGen -q); ≤ 0 disables quality refinement.
@@ -36,6 +39,9 @@ struct TetgenOptions {
   bool preserve_surface = true;
   /// Program to run ("tetgen" from $PATH by default).
   std::string tetgen_program = "tetgen";
+  /// Progress (stages "decimate", "tetgen": before and after the program runs; TetGen itself
+  /// reports nothing); returning false cancels (tbsp::Cancelled).
+  ProgressCallback progress;
 };
 
 /// \brief Face-constrained Delaunay tetrahedralization of a closed, manifold, consistently

@@ -20,7 +20,6 @@
 #include <vector>
 
 #include <Eigen/Core>
-#include <opencv2/core.hpp>
 
 #include "tbsp/mesh/tri_mesh.h"
 #include "tbsp/multiview/camera.h"
@@ -47,10 +46,8 @@ struct RenderBuffers {
   int skipped_near = 0;            ///< triangles skipped because they cross the near plane
 
   bool covered(int x, int y) const { return face[static_cast<std::size_t>(y) * width + x] >= 0; }
-  /// The silhouette as an 8-bit single-channel cv::Mat (a copy).
-  cv::Mat maskImage() const;
-  /// Depth as a 32-bit float cv::Mat (a copy; +inf where empty).
-  cv::Mat depthImage() const;
+  // As OpenCV images (mask, depth, shaded colour): tbsp/io/render_images.h (tbsp_capture_io),
+  // which keeps OpenCV out of this library's headers.
 };
 
 class Rasterizer {
@@ -70,17 +67,6 @@ private:
   void renderChecked(const TriMesh& mesh, const Camera& camera, RenderBuffers& out) const;
   RasterOptions options_;
 };
-
-/// Colour image (CV_8UC3, BGR) from per-vertex colours (mesh.C, 0..1 RGB, n x 3) interpolated
-/// with the barycentrics; background colour elsewhere. Needs buffers with barycentrics.
-cv::Mat shade_vertex_colors(const TriMesh& mesh, const RenderBuffers& buffers,
-                            const cv::Vec3b& background = {0, 0, 0});
-
-/// Textured colour image (CV_8UC3, BGR): per-vertex texture coordinates uv (n x 2, OBJ
-/// convention: u right, v up, [0,1]) interpolated perspective-correctly, bilinear lookup in
-/// `texture` (CV_8UC3), wrapping outside [0,1]. Needs buffers with barycentrics.
-cv::Mat shade_texture(const TriMesh& mesh, const Eigen::MatrixX2d& uv, const cv::Mat& texture,
-                      const RenderBuffers& buffers, const cv::Vec3b& background = {0, 0, 0});
 
 /// Rim vertices of one view (§6.3.1, Fig. 6.2): vertices on the contour generator (incident to
 /// a front- and a back-facing triangle) that are visible and project within `tolerance_px`

@@ -71,6 +71,7 @@ FitReport TemplateFitting<PointT>::reconstruct(TriMesh& output) {
   if constexpr (!pcl::traits::has_normal_v<PointT>) r.normals_estimated = true;
   output = std::move(result);
   status_ = std::move(status);
+  report_ = r;
   this->deinitCompute();
   return r;
 }

@@ -1,4 +1,4 @@
-#include "tbsp/solve/harmonic.h"
+#include "tbsp/mesh/harmonic.h"
 
 #include <string>
 

@@ -1,0 +1,38 @@
+#pragma once
+// The `tbsp` command table: every sub-command registers itself (options on the CLI11 app, and
+// what to run when it is chosen); main() parses, runs the chosen one and maps exceptions to exit
+// codes (0 ok, 2 invalid input, 3 numerical failure, 130 cancelled, 1 anything else).
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <memory>
+#include <vector>
+
+namespace tbsp::cli {
+
+struct Command {
+  CLI::App* app = nullptr;     ///< the sub-command, as registered
+  std::function<int()> run;    ///< runs it with the parsed options; returns the exit code
+};
+using CommandTable = std::vector<Command>;
+
+/// Registers a command written as `add_X(app, args, sub)` + `cmd_X(args)`: the options live
+/// in a shared Args object that the run function receives.
+template <class Args, class Add, class Run>
+void register_command(CLI::App& app, CommandTable& table, Add add, Run run) {
+  auto args = std::make_shared<Args>();
+  CLI::App* sub = nullptr;
+  add(app, *args, sub);
+  table.push_back({sub, [args, run] { return run(*args); }});
+}
+
+void add_deform_commands(CLI::App& app, CommandTable& table);   // deform
+void add_fit_commands(CLI::App& app, CommandTable& table);      // fit, synth-scan
+void add_mesh_commands(CLI::App& app, CommandTable& table);     // validate, convert, render, generate
+void add_demo_commands(CLI::App& app, CommandTable& table);     // demo
+void add_capture_commands(CLI::App& app, CommandTable& table);  // synth-studio, replay
+void add_tet_commands(CLI::App& app, CommandTable& table);      // tetdeform
+void add_texture_commands(CLI::App& app, CommandTable& table);  // texture
+void add_mocap_commands(CLI::App& app, CommandTable& table);    // mocap
+
+}  // namespace tbsp::cli
