@@ -1,0 +1,257 @@
+// Detail rounds of a fit (beyond the thesis; FitParameters::detail_rounds).
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "fit_state.h"
+#include "tbsp/core/logging.h"
+#include "tbsp/core/timer.h"
+#include "tbsp/mesh/cotan_laplacian.h"
+#include "tbsp/mesh/point_mesh_distance.h"
+
+namespace tbsp {
+namespace fit_impl {
+
+// Detail rounds (beyond the thesis; FitParameters::detail_rounds): §5.5.1's Laplacian
+// updating after the §5.3 fit, with everything the data does not support held where the fit
+// put it. Each round takes the Laplacian and differential coordinates of the current fit as
+// the regularizer (so the template's detail no longer holds protrusions back), constrains the
+// matched vertices to data targets with detail_weight — the kernel mean of the data -> fit
+// residuals (detail_residual_matching) or the §5.3 kernel targets — every other vertex to its
+// current position with match_weight (the semantic hole filling stays) and, with
+// detail_surface_weight, faces to the cloud points that project onto them; it factorizes once
+// and iterates matching + back-substitution.
+void detail_rounds(FitState& s) {
+  FitParameters& u = s.u;
+  FitReport& rep = s.rep;
+  if (u.detail_rounds > 0 && (u.laplacian_updating || u.remeshing))
+    rep.message += "detail rounds skipped: Laplacian updating already regularizes with the current shape. ";
+  if (!(u.detail_rounds > 0 && u.max_iterations > 0 && !u.laplacian_updating && !u.remeshing)) return;
+  Eigen::MatrixX3d& V = s.V;
+  const Eigen::MatrixX3i& F = s.F;
+  const Eigen::MatrixX3d& P = s.P;
+  const Eigen::MatrixX3d& N = s.N;
+  const std::vector<char>& roi_ok = s.roi_ok;
+  const std::vector<VertexStatus>& status = s.status;
+  const PointSearch& search = s.search;
+  const Eigen::Index np = s.np;
+  const double cos_max = s.cos_max;
+  const auto t0 = Clock::now();
+  report_progress(s.progress, 0.9, "detail rounds");
+  const double r = u.max_match_distance;
+  const double rd = u.detail_radius_factor * r;  // kernel radius of the residual matching
+  const double cos_detail = std::cos(u.detail_normal_angle_deg * M_PI / 180.0);
+  std::vector<std::vector<int>> vf(std::size_t(V.rows()));  // faces around each vertex
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) vf[std::size_t(F(f, c))].push_back(int(f));
+  LaplacianDeformer Dd;  // one for all rounds: the solver keeps its symbolic analysis
+  Dd.setUseRotationField(false);
+  for (int round = 0; round < u.detail_rounds; ++round) {
+    TriMesh cur;
+    cur.V = V;
+    cur.F = F;
+    Dd.clearConstraints();
+    Dd.setMesh(cur);
+    s.addMarkers(Dd, u.detail_marker_weight);
+    const auto t_round = Clock::now();
+    // residual matching: every ROI point's closest point on the fit, as a face and barycentric
+    // weights, found at the start of the round and then updated among the faces around the
+    // last one after each solve (the fit moves little per iteration). Points farther than 3 r
+    // are not tracked; the kernel below skips those farther than r (outliers, other surfaces).
+    std::vector<Eigen::Index> rk;  // cloud index of each tracked point
+    std::vector<int> rf;           // its closest face
+    Eigen::MatrixX3d rb;           // and the barycentric weights of its closest point
+    if (u.detail_residual_matching) {
+      const MeshDistance md(V, F);
+      std::vector<int> face(std::size_t(np), -1);
+#pragma omp parallel for schedule(dynamic, 1024)
+      for (Eigen::Index i = 0; i < np; ++i) {
+        if (!roi_ok[std::size_t(i)]) continue;
+        int f = -1;
+        const Eigen::Vector3d p = P.row(i).transpose();
+        if ((md.closest(p, &f) - p).norm() <= 3 * r) face[std::size_t(i)] = f;
+      }
+      for (Eigen::Index i = 0; i < np; ++i)
+        if (face[std::size_t(i)] >= 0) { rk.push_back(i); rf.push_back(face[std::size_t(i)]); }
+      rb.resize(Eigen::Index(rk.size()), 3);
+      for (std::size_t t = 0; t < rk.size(); ++t) {
+        const int f = rf[t];
+        rb.row(Eigen::Index(t)) = closest_point_barycentric(P.row(rk[t]).transpose(), V.row(F(f, 0)).transpose(),
+                                                      V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose()).transpose();
+      }
+    }
+    // the tracked points' closest points on the current fit
+    auto tracked_closest = [&]() {
+      Eigen::MatrixX3d C(Eigen::Index(rk.size()), 3);
+      for (Eigen::Index t = 0; t < C.rows(); ++t) {
+        const int f = rf[std::size_t(t)];
+        C.row(t) = rb(t, 0) * V.row(F(f, 0)) + rb(t, 1) * V.row(F(f, 1)) + rb(t, 2) * V.row(F(f, 2));
+      }
+      return C;
+    };
+    // kernel sums of the residual matching at v: Σw, Σw², Σw (p_k − c_k) over the tracked points
+    // whose closest point c_k lies within r_d of v, whose normal is within
+    // detail_normal_angle_deg of their face's and whose residual is at most r
+    struct ResidualSums {
+      double sw = 0, sw2 = 0;
+      Eigen::Vector3d sr = Eigen::Vector3d::Zero();
+    };
+    auto residual_sums = [&](const PointSearch& cs, const Eigen::MatrixX3d& C, const Eigen::MatrixX3d& FNc,
+                             const Eigen::Vector3d& v, std::vector<std::pair<Eigen::Index, double>>& nb) {
+      ResidualSums a;
+      cs.radius(v, rd, nb);
+      for (const auto& [t, d2] : nb) {
+        const Eigen::Index ci = rk[std::size_t(t)];
+        if (N.row(ci).dot(FNc.row(rf[std::size_t(t)])) < cos_detail) continue;
+        const Eigen::Vector3d res = (P.row(ci) - C.row(t)).transpose();
+        if (res.squaredNorm() > r * r) continue;
+        const double w = bspline_weight(std::sqrt(d2) / rd);
+        a.sw += w;
+        a.sw2 += w * w;
+        a.sr += w * res;
+      }
+      return a;
+    };
+    // sparse support, as in stage 2: a vertex whose residual kernel holds fewer than
+    // support_points × (r_d / r)² effective points (the count stage 2's kernel would see in the
+    // same patch) gets least-squares weight ∝ n_eff — at the rim of holes one or two noisy
+    // points otherwise pull it off the surface
+    Eigen::VectorXd dscale = Eigen::VectorXd::Ones(V.rows());
+    if (u.detail_residual_matching && u.support_points > 0) {
+      const double need = u.support_points * (rd / r) * (rd / r);
+      const Eigen::MatrixX3d C = tracked_closest();
+      const PointSearch csearch(C);
+      const Eigen::MatrixX3d FN0 = face_normals(V, F);
+#pragma omp parallel
+      {
+        std::vector<std::pair<Eigen::Index, double>> nb;
+#pragma omp for schedule(dynamic, 256)
+        for (Eigen::Index j = 0; j < V.rows(); ++j) {
+          if (status[std::size_t(j)] != VertexStatus::Matched) continue;
+          const ResidualSums a = residual_sums(csearch, C, FN0, V.row(j).transpose(), nb);
+          dscale(j) = a.sw2 > 0 ? std::min(1.0, a.sw * a.sw / a.sw2 / need) : 1.0;
+        }
+      }
+    }
+    std::vector<int> ids(std::size_t(V.rows()), -1);
+    for (Eigen::Index j = 0; j < V.rows(); ++j) {
+      const bool data = status[std::size_t(j)] == VertexStatus::Matched;
+      const int id = Dd.addPositionConstraint(SurfacePoint::atVertex(int(j)), V.row(j).transpose(),
+                                              data ? u.detail_weight * std::sqrt(dscale(j)) : u.match_weight);
+      if (data) ids[std::size_t(j)] = id;
+    }
+    std::vector<char> is_data(std::size_t(V.rows()), 0);
+    for (Eigen::Index j = 0; j < V.rows(); ++j) is_data[std::size_t(j)] = ids[std::size_t(j)] >= 0;
+    // data -> surface: each face onto which 3 or more cloud points (ROI, within r) project
+    // pulls its centroid by their mean residual. The §5.3 kernel targets (residual matching
+    // off) move along the normals only; these also pull sideways where the data reach beyond
+    // the mesh (the tip of a protrusion projects onto the faces around the fit's tip vertex).
+    if (u.detail_surface_weight > 0) {
+      const MeshDistance md(V, F);
+      Eigen::MatrixX3d CP(np, 3);
+      Eigen::VectorXi CF = Eigen::VectorXi::Constant(np, -1);
+#pragma omp parallel for schedule(dynamic, 1024)
+      for (Eigen::Index i = 0; i < np; ++i) {
+        if (!roi_ok[std::size_t(i)]) continue;
+        int f = -1;
+        CP.row(i) = md.closest(P.row(i).transpose(), &f).transpose();
+        CF(i) = f;
+      }
+      Eigen::MatrixX3d rsum = Eigen::MatrixX3d::Zero(F.rows(), 3);
+      Eigen::VectorXi rcount = Eigen::VectorXi::Zero(F.rows());
+      for (Eigen::Index i = 0; i < np; ++i) {
+        const int f = CF(i);
+        if (f < 0 || (P.row(i) - CP.row(i)).norm() > r) continue;
+        rsum.row(f) += P.row(i) - CP.row(i);
+        ++rcount(f);
+      }
+      for (Eigen::Index f = 0; f < F.rows(); ++f) {
+        if (rcount(f) < 3) continue;
+        const Eigen::RowVector3d centroid = (V.row(F(f, 0)) + V.row(F(f, 1)) + V.row(F(f, 2))) / 3.0;
+        Dd.addPositionConstraint(SurfacePoint::onFace(int(f), Eigen::Vector3d::Constant(1.0 / 3)),
+                                 (centroid + rsum.row(f) / rcount(f)).transpose(), u.detail_surface_weight);
+        ++rep.detail_surface_constraints;
+      }
+    }
+    rep.detail_points_tracked = Eigen::Index(rk.size());
+    logger()->trace("[TemplateFitting] detail round {}: set-up {:.3f} s ({} data -> surface constraints, {} points tracked)",
+                    round + 1, seconds_since(t_round), rep.detail_surface_constraints, rk.size());
+    int k = 0;
+    for (; k < u.detail_iterations; ++k) {
+      const Eigen::MatrixX3d VN = vertex_normals(V, F);
+      Eigen::MatrixX3d T = Eigen::MatrixX3d::Constant(V.rows(), 3, std::numeric_limits<double>::quiet_NaN());
+      if (u.detail_residual_matching) {
+        if (k > 0) {
+          // the fit moved a little: each point's closest point among the faces around its last one
+#pragma omp parallel for schedule(dynamic, 1024)
+          for (Eigen::Index t = 0; t < Eigen::Index(rk.size()); ++t) {
+            const Eigen::Vector3d p = P.row(rk[std::size_t(t)]).transpose();
+            const int f0 = rf[std::size_t(t)];
+            double best = std::numeric_limits<double>::infinity();
+            for (int c = 0; c < 3; ++c)
+              for (int f : vf[std::size_t(F(f0, c))]) {
+                const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), e = V.row(F(f, 2)).transpose();
+                const Eigen::Vector3d w = closest_point_barycentric(p, a, b, e);
+                const double d2 = (p - (w(0) * a + w(1) * b + w(2) * e)).squaredNorm();
+                if (d2 < best) { best = d2; rf[std::size_t(t)] = f; rb.row(t) = w.transpose(); }
+              }
+          }
+        }
+        // target = vertex + kernel-weighted mean of the residuals p_k - c_k
+        const Eigen::MatrixX3d C = tracked_closest();
+        const PointSearch csearch(C);
+        const Eigen::MatrixX3d FNd = face_normals(V, F);
+#pragma omp parallel
+        {
+          std::vector<std::pair<Eigen::Index, double>> nb;
+#pragma omp for schedule(dynamic, 256)
+          for (Eigen::Index j = 0; j < V.rows(); ++j) {
+            if (ids[std::size_t(j)] < 0) continue;
+            const Eigen::Vector3d vj = V.row(j).transpose();
+            const ResidualSums a = residual_sums(csearch, C, FNd, vj, nb);
+            if (a.sw <= 0) continue;
+            Eigen::Vector3d m = a.sr / a.sw;
+            if (m.norm() > r) m *= r / m.norm();
+            T.row(j) = (vj + m).transpose();
+          }
+        }
+      } else {
+#pragma omp parallel
+        {
+          std::vector<std::pair<Eigen::Index, double>> nb;
+#pragma omp for schedule(dynamic, 256)
+          for (Eigen::Index j = 0; j < V.rows(); ++j) {
+            if (ids[std::size_t(j)] < 0) continue;
+            const Eigen::Vector3d vj = V.row(j).transpose(), nj = VN.row(j).transpose();
+            if (nj.squaredNorm() == 0) continue;
+            search.radius(vj, r, nb);
+            double sw = 0, off = 0;
+            Eigen::Vector3d sp = Eigen::Vector3d::Zero();
+            Eigen::Matrix3d spp = Eigen::Matrix3d::Zero();
+            kernel_sums(nb, P, N, roi_ok, nj, cos_max, r, sw, sp, spp);
+            if (sw <= 0) continue;
+            const Eigen::Vector3d q = kernel_target(vj, nj, sw, sp, spp, u.plane_fit, double(nb.size()), &off);
+            if (off > u.rim_rejection * r) continue;
+            T.row(j) = (vj + std::clamp((q - vj).dot(nj), -r, r) * nj).transpose();
+          }
+        }
+      }
+      for (Eigen::Index j = 0; j < V.rows(); ++j)  // no data this time: the last target stays
+        if (ids[std::size_t(j)] >= 0 && T.row(j).allFinite()) Dd.setPositionTarget(ids[std::size_t(j)], T.row(j).transpose());
+      const Eigen::MatrixX3d Vn = Dd.deform();
+      // 99th percentile move of the data-supported vertices, as in stage 2
+      const double move = percentile99_move(Vn, V, is_data);
+      V = Vn;
+      logger()->debug("[TemplateFitting] detail round {} iteration {}: 99th percentile move {:.3g}", round + 1, k + 1, move);
+      logger()->trace("[TemplateFitting] detail solve: factorize {:.3f}, back-substitution {:.3f}", Dd.report().t_factorize,
+                      Dd.report().t_solve);
+      if (move < u.detail_tolerance) { ++k; break; }
+    }
+    rep.detail_iterations_run += k;
+  }
+  rep.t_detail = seconds_since(t0);
+}
+
+}  // namespace fit_impl
+}  // namespace tbsp

@@ -1,0 +1,161 @@
+#pragma once
+// Internal: the state the stages of fit_template share (template_fitter.cpp runs them in order).
+// One stage per file:
+//   fit_setup.cpp        finite points, ROI, normals, derived parameters, markers, template mask
+//   fit_initial.cpp      stage 1: initial deformation from the markers, global scale (§5.2);
+//                        orientation of estimated normals by the posed template
+//   fit_matching.cpp     the §5.3 kernel: matching every vertex against the cloud
+//   fit_iterate.cpp      stage 2: the iterative fit (matching, constraints, solve, convergence)
+//   fit_surface_steps.cpp  §5.5 inside the iterations: adaptive subdivision, tangential fairing
+//   fit_propagation.cpp  stage 3: displacement propagation (§5.3 end)
+//   fit_detail.cpp       detail rounds (Laplacian updating after the fit)
+//   fit_repair.cpp       fold repair, pleat collapse, self-intersection repair (§5.5.3)
+//   fit_metrics.cpp      distances, fold and intersection counts for the report
+// Not installed; nothing here is public API.
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "tbsp/core/progress.h"
+#include "tbsp/deform/laplacian_deformer.h"
+#include "tbsp/fitting/template_fitter.h"
+#include "tbsp/mesh/harmonic.h"
+#include "tbsp/mesh/point_search.h"
+#include "tbsp/mesh/tri_mesh.h"
+
+namespace tbsp {
+namespace fit_impl {
+
+struct FitState {
+  FitState(const TriMesh& t, const std::vector<FitMarker>& m, const ProgressCallback& p, FitReport& r,
+           std::vector<VertexStatus>& st)
+      : templ(t), markers(m), progress(p), rep(r), status(st), u(r.used) {}
+
+  const TriMesh& templ;
+  const std::vector<FitMarker>& markers;
+  const ProgressCallback& progress;
+  FitReport& rep;
+  std::vector<VertexStatus>& status;
+  FitParameters& u;  ///< the parameters used (rep.used: automatic values filled in)
+  const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
+
+  // the cloud: finite points only (P, N: np rows), roi_ok per point
+  Eigen::Index np = 0;
+  Eigen::MatrixX3d P, N;
+  std::vector<char> roi_ok;
+  Eigen::Vector3d cloud_lo, cloud_hi;
+  double diag = 0;  ///< bounding-box diagonal of the ROI points
+  PointSearch search;
+  bool orient = false;  ///< orient N by the posed template (estimated or unreliable normals)
+  double cos_max = 0;   ///< cos θ_max
+
+  // markers (template vertex -> target) and the template mask
+  std::vector<Eigen::Vector3d> mtarget;
+  std::vector<int> mverts;
+  std::vector<char> masked;
+
+  // the fit
+  LaplacianDeformer D;
+  Eigen::MatrixX3d V;   ///< current shape
+  Eigen::MatrixX3d V0;  ///< initial deformation (stage 1), extended by subdivision
+  Eigen::MatrixX3i F;
+  std::vector<char> matched;
+  Eigen::MatrixX3d target;
+  std::vector<int> prop_ids;         ///< per vertex: id of its propagated constraint (-1: none)
+  bool propagation_handled = false;  ///< propagation decided in the loop (done or skipped for good)
+
+  /// The markers as constraints of d (weight × each marker's own weight).
+  void addMarkers(LaplacianDeformer& d, double weight) const;
+  /// Cloud normals for the fold-over checks: estimated normals made consistent (once, on first
+  /// use) unless the fit already did.
+  const Eigen::MatrixX3d& consistentNormals();
+
+ private:
+  Eigen::MatrixX3d NC_;
+  bool nc_ready_ = false;
+};
+
+// ---- fit_setup.cpp
+/// Finite points, ROI, search tree, spacing, normals (given or PCA) and the derived parameters.
+void prepare_cloud(FitState& s, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
+                   const FitParameters& params, bool orient_normals);
+/// Marker targets and the template mask; throws InvalidInput naming the marker / vertex.
+void prepare_markers(FitState& s, const Eigen::MatrixX3d& P_in, const RegionOfInterest& roi);
+
+// ---- fit_initial.cpp
+/// Stage 1: initial deformation from the markers, global scale; sets V, V0, F; freezes the field.
+void initial_pose(FitState& s);
+/// Estimated normals point away from the posed template (and are made consistent if asked).
+void orient_cloud_normals(FitState& s);
+
+// ---- fit_matching.cpp
+/// Per-vertex cloud neighbours cached in the frozen phase (see fit_iterate.cpp).
+struct NeighbourCache {
+  std::vector<std::vector<std::pair<Eigen::Index, double>>> nb;
+  Eigen::MatrixX3d at;
+  std::vector<double> r;
+};
+/// The §5.3 kernel targets at radius r for every vertex of s.V (only the frozen set when
+/// frozen_phase): s.target, s.matched and match_scale (weight factors) are set. Returns whether
+/// the binned cloud was used.
+bool match_vertices(FitState& s, double r, bool frozen_phase, const std::vector<int>& frozen_ids, NeighbourCache& cache,
+                    Eigen::VectorXd& match_scale);
+/// Target of §5.3 from kernel-weighted sums (Σw, Σw p, Σw ppᵀ); see fit_matching.cpp.
+Eigen::Vector3d kernel_target(const Eigen::Vector3d& vj, const Eigen::Vector3d& nj, double sw, const Eigen::Vector3d& sp,
+                              const Eigen::Matrix3d& spp, bool plane_fit, double in_ball, double* tangential_offset);
+/// Kernel sums over the cloud points nb within radius rr of a vertex with normal nj.
+void kernel_sums(const std::vector<std::pair<Eigen::Index, double>>& nb, const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N,
+                 const std::vector<char>& roi_ok, const Eigen::Vector3d& nj, double cos_max, double rr, double& sw,
+                 Eigen::Vector3d& sp, Eigen::Matrix3d& spp, double* sw2 = nullptr);
+/// 99th percentile of |A_j - B_j| over the rows j with use[j] (0 when none).
+double percentile99_move(const Eigen::MatrixX3d& A, const Eigen::MatrixX3d& B, const std::vector<char>& use);
+
+// ---- fit_iterate.cpp
+/// Stage 2: the iterative fit. Returns whether it converged.
+bool iterate_fit(FitState& s);
+
+// ---- fit_surface_steps.cpp
+/// Adaptive 1-to-4 subdivision of faces whose data error exceeds ε (§5.5.2). Returns whether
+/// the mesh changed.
+bool remesh_step(FitState& s, double r);
+/// Tangential area-weighted fairing of matched vertices along the cloud normals (eq. 5.1-5.2).
+void fairing_step(FitState& s, double r);
+
+// ---- fit_propagation.cpp
+/// Displacement propagation inside the frozen iterations.
+struct Propagation {
+  HarmonicInterpolator harmonic;
+  std::vector<int> sources;  ///< the matched vertices the interpolation starts from
+  Eigen::MatrixX3d N0;       ///< normals of the initial deformation
+  bool in_loop = false;      ///< propagated constraints are in the frozen system
+  /// Normal displacements of the sources relative to V0, harmonically interpolated, as targets.
+  Eigen::MatrixX3d targets(const Eigen::MatrixX3d& X, const Eigen::MatrixX3d& V0) const;
+};
+/// Adds the propagated constraints to the frozen system (s.D) when the set is frozen.
+void start_propagation(FitState& s, Propagation& p);
+/// Moves the propagated constraints' targets with the current shape.
+void update_propagation(FitState& s, const Propagation& p);
+/// Stage 3: vertex status, and the separate propagation solve when the loop did not do it.
+void propagate_displacements(FitState& s);
+
+// ---- fit_detail.cpp
+void detail_rounds(FitState& s);
+
+// ---- fit_repair.cpp
+/// Faces whose normal is more than 120° against the normal NR of the cloud point nearest to
+/// their centre (within max_match_distance, ROI).
+int flipped_faces(const FitState& s, const Eigen::MatrixX3d& X, const Eigen::MatrixX3d& NR);
+/// Edges whose two faces are bent back by more than 120°; marks their vertices when mark.
+int folded_edges(const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& X, std::vector<char>* mark);
+/// Fold repair, pleat collapse, self-intersection repair. Returns the self-intersection count
+/// when it is known without counting again (0), else -1.
+int repair_surface(FitState& s);
+
+// ---- fit_metrics.cpp
+void compute_metrics(FitState& s, int known_crossings);
+
+}  // namespace fit_impl
+}  // namespace tbsp
