@@ -13,6 +13,7 @@
 
 #include <omp.h>
 
+#include "tbsp/core/huge_pages.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/mesh/primitives.h"
 #include "tbsp/multiview/rasterizer.h"
@@ -110,6 +111,7 @@ int stream(const std::string& dir, int frames) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  tbsp::reexec_with_huge_pages(argv);  // as the tbsp CLI (tbsp/core/huge_pages.h)
   if (argc >= 2 && std::string(argv[1]) == "raster") {
     int repeats = 21;
     if (argc >= 4 && std::string(argv[2]) == "--repeats") repeats = std::stoi(argv[3]);

@@ -3,6 +3,8 @@
 // the rotation field. Run: ./build/bench/bench_deform [--benchmark_filter=...]
 #include <benchmark/benchmark.h>
 
+#include "bench_main.h"
+
 #include <Eigen/Geometry>
 
 #include <chrono>
@@ -155,4 +157,4 @@ static void BM_SurveyPlaneRotationField(benchmark::State& st) {
 }
 BENCHMARK(BM_SurveyPlaneRotationField)->Arg(1)->Arg(0)->Iterations(1)->Unit(benchmark::kMillisecond);
 
-BENCHMARK_MAIN();
+TBSP_BENCHMARK_MAIN()

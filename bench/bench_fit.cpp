@@ -23,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "tbsp/core/huge_pages.h"
 #include "tbsp/plugins/synthetic_scan.h"
 #include "tbsp/fitting/template_fitter.h"
 #include "tbsp/io/cloud_io.h"
@@ -75,6 +76,7 @@ double median_of(std::vector<FitReport> r, double FitReport::*field) {
 }
 
 int main(int argc, char** argv) {
+  tbsp::reexec_with_huge_pages(argv);  // as the tbsp CLI (tbsp/core/huge_pages.h)
   bool poisson = true;
   int repeat = 3;
   std::string only;

@@ -24,6 +24,7 @@
 
 #include <omp.h>
 
+#include "tbsp/core/huge_pages.h"
 #include "tbsp/deform/deformation_transfer.h"
 #include "tbsp/deform/tet_deformer.h"
 #include "tbsp/io/mesh_io.h"
@@ -173,6 +174,7 @@ CgalRow run_cgal(const Model& m, int iterations) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  tbsp::reexec_with_huge_pages(argv);  // as the tbsp CLI (tbsp/core/huge_pages.h)
   const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
   const int iterations = 60;
   std::printf("threads: %d, %d iterations per model (timings: medians per iteration, ms)\n\n", omp_get_max_threads(), iterations);

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "tbsp/core/huge_pages.h"
 #include "tbsp/fitting/inverse_texture_mapping.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/mesh/remeshing.h"
@@ -92,6 +93,7 @@ long peak_rss_mb() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  tbsp::reexec_with_huge_pages(argv);  // as the tbsp CLI (tbsp/core/huge_pages.h)
   bool quick = false;
   int repeat = 3;
   int only = -1;  // run just this row (0-based), e.g. to read the 5 MP row's own peak memory

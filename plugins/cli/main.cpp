@@ -7,9 +7,11 @@
 
 #include "command.h"
 #include "tbsp/core/error.h"
+#include "tbsp/core/huge_pages.h"
 #include "tbsp/core/logging.h"
 
 int main(int argc, char** argv) {
+  tbsp::reexec_with_huge_pages(argv);  // before any thread starts (huge_pages.h)
   CLI::App app{"tbsp - template-based shape processing for PCL pipelines"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "tbsp 0.1.0");
