@@ -52,8 +52,11 @@ std::vector<Eigen::Matrix3d> node_rotations(const ConstraintGraph& graph, const 
 /// of node rotations is two back-substitutions.
 class RotationField {
 public:
-  /// \param tree_parent / tree_order hemisphere-consistency order over the nodes (from
+  /// \param V, F the mesh (#V by 3, #F by 3).
+  /// \param nodes the vertices whose rotations interpolate() is given.
+  /// \param tree_parent, tree_order hemisphere-consistency order over the nodes (from
   /// ConstraintGraph; pass empty vectors to keep the signs given).
+  /// \param weights Laplacian weights of the harmonic system (cotangent by default).
   void compute(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::vector<int>& nodes,
                std::vector<int> tree_parent = {}, std::vector<int> tree_order = {},
                LaplacianWeights weights = LaplacianWeights::Cotangent);

@@ -18,10 +18,13 @@ namespace tbsp {
 /// set in eq. 3.13) the iteration would return a reflection or diverge, so R comes from the SVD
 /// F = UΣVᵀ as U diag(1,1,det(UVᵀ)) Vᵀ, the closest proper rotation. det R = +1 always; a
 /// non-finite F gives R0. O(1), about 5 steps from a good start.
+/// \param F the matrix to decompose.
+/// \param R0 the warm start (a rotation).
 /// \param[out] iterations Newton steps used (0 when the SVD path was taken).
 Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, const Eigen::Matrix3d& R0, int* iterations = nullptr);
 
 /// \brief polar_rotation(T, identity): the closest proper rotation to T (eq. 3.15).
+/// \param T the matrix. \param[out] iterations as polar_rotation.
 Eigen::Matrix3d closest_rotation(const Eigen::Matrix3d& T, int* iterations = nullptr);
 
 /// \brief Flips quaternion signs so that q_i · q_ref ≥ 0, where q_ref for each entry is given by

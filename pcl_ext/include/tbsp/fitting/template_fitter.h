@@ -263,6 +263,13 @@ struct FitReport {
 /// `orient_normals` is true, e.g. from PCL's estimator) are oriented by the posed template
 /// (and then made consistent with FitParameters::consistent_normals).
 /// Non-finite points are skipped and counted.
+/// \param templ the template (a valid triangle mesh).
+/// \param P, N the cloud's points and normals (see above).
+/// \param markers template vertex ↔ cloud point / position correspondences (at least one).
+/// \param roi what is excluded from matching (template vertices, cloud points).
+/// \param params the parameters (validated: FitParameters::isValid); the values used are in the report.
+/// \param progress called with (fraction, stage); returning false cancels (tbsp::Cancelled).
+/// \param orient_normals orient given normals by the posed template too.
 /// \param[out] result fitted mesh (template connectivity unless remeshing)
 /// \param[out] status per result vertex
 /// \throws InvalidInput for an empty cloud, markers on missing vertices/points, marker sets that

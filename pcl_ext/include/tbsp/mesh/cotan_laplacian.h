@@ -53,6 +53,8 @@ Eigen::SparseMatrix<double> uniform_graph_laplacian(const Eigen::MatrixX3i& F, E
 /// cotangent: L = M⁻¹ C with M = diag(2 · voronoi_areas) so that w_ij = (cot α + cot β)/(2 A_i);
 /// uniform: L = D⁻¹ G (G the graph Laplacian, D the degrees).
 /// Rows of isolated vertices are empty. O(#F).
+/// \param V, F the mesh (#V by 3, #F by 3).
+/// \param weights cotangent (default) or uniform.
 /// \param sliver_guard 0 (default): cotangent rows divide by the vertex area A_i (floored at
 /// 1e-8 of the mean only against division by zero). > 0: A_i is floored at sliver_guard · ē_i²
 /// (ē_i the mean length of the vertex's edges; a regular vertex has A_i ≈ 0.87 ē_i²), so a

@@ -64,6 +64,7 @@ MeshReport require_valid_mesh(const TriMesh& mesh, const MeshRequirements& req, 
 /// predicates (Epick), so nearly coplanar slivers are decided exactly. Cost: O(#F log #F +
 /// #candidate pairs) (box intersection of the faces' bounding boxes); 0.15 s for 110k faces
 /// here.
+/// \param V, F the mesh (#V by 3, #F by 3).
 /// \param pairs if given, receives the intersecting pairs as row indices of F (first < second),
 ///        sorted.
 /// \param degenerate_faces if given, receives the number of faces with collinear corners

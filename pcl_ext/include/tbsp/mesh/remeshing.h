@@ -42,6 +42,7 @@ int count_flipped_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, co
 /// corners, each counted once, weighted by its area). A surface that doubles back on itself in a small crumple
 /// has such faces even when no single edge is bent back sharply; a smooth surface has none unless
 /// it turns by more than 90° within those rings. O(#F · two-ring size), parallel.
+/// \param V, F the mesh (#V by 3, #F by 3).
 /// \param face_mark if given, resized to #F and set to 1 for each folded face.
 /// \returns the number of folded faces.
 int count_local_folds(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, std::vector<char>* face_mark = nullptr);
@@ -93,6 +94,10 @@ struct PleatCollapseResult {
 /// O(passes · (#F + Σ candidate neighbourhoods)), the reference is evaluated ~ 5 × per face
 /// of a neighbourhood tried. Written by hand: CGAL's edge-collapse simplification takes a cost
 /// and placement policy but no "against a reference normal" stop and renumbers the mesh.
+/// \param V, F the mesh (#V by 3, #F by 3), changed in place.
+/// \param reference_normal the expected outward normal at a point (zero: no reference there).
+/// \param max_passes at most this many passes (default 30).
+/// \param min_cosine faces with n_f · r < min_cosine count as against the reference (default 0).
 /// \param old_to_new if given, set to the new index of every old vertex (-1: removed).
 /// \pre F is a manifold triangle mesh (boundary allowed).
 PleatCollapseResult collapse_pleats(Eigen::MatrixX3d& V, Eigen::MatrixX3i& F,

@@ -35,7 +35,7 @@ double tet_mesh_volume(const TetMesh& mesh);
 Eigen::Index orient_tets(TetMesh& mesh);
 
 /// \brief Faces used by exactly one tetrahedron, oriented outward (for positively oriented
-/// tets). O(#T log #T). \param[out] face_tet optional: the tetrahedron owning each face.
+/// tets). O(#T log #T). \param T the tetrahedra (#T by 4). \param[out] face_tet optional: the tetrahedron owning each face.
 Eigen::MatrixX3i tet_boundary_faces(const Eigen::Matrix<int, Eigen::Dynamic, 4>& T,
                                     std::vector<int>* face_tet = nullptr);
 
@@ -46,6 +46,7 @@ TriMesh tet_boundary_mesh(const TetMesh& mesh);
 /// \brief The boundary surface with only the vertices it uses, positions taken from X (#V by 3,
 /// e.g. deformed positions of the tet mesh). \param[out] vertex_map optional: for each tet-mesh
 /// vertex its index in the surface, or −1 (interior).
+/// \param X, T vertex positions (#V by 3) and tetrahedra (#T by 4).
 TriMesh tet_boundary_surface(const Eigen::MatrixX3d& X, const Eigen::Matrix<int, Eigen::Dynamic, 4>& T,
                              std::vector<int>* vertex_map = nullptr);
 

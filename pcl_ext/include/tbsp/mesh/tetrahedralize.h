@@ -22,6 +22,8 @@ namespace tbsp {
 /// the input unchanged when it already has ≤ target_faces faces.
 /// O(#F log #F). \throws InvalidInput for non-manifold, empty or degenerate input, or
 /// target_faces < 4.
+/// \param mesh the closed or open manifold triangle mesh to simplify.
+/// \param target_faces the largest face count of the result (≥ 4).
 /// \param progress called with the fraction of the collapses done (stage "decimate"); returning
 /// false cancels (tbsp::Cancelled; the input is untouched, nothing is returned).
 TriMesh decimate_mesh(const TriMesh& mesh, Eigen::Index target_faces, const ProgressCallback& progress = {});
