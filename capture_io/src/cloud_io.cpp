@@ -38,7 +38,7 @@ void prevalidate_pcd(const std::string& path) {
   in.seekg(0, std::ios::end);
   const std::uint64_t file_size = std::uint64_t(in.tellg());
   in.seekg(0);
-  std::vector<std::string> fields;
+  std::vector<std::string> fields, types;
   std::vector<long long> sizes, counts;
   long long width = -1, height = 1, points = -1;
   std::string data, line;
@@ -58,8 +58,9 @@ void prevalidate_pcd(const std::string& path) {
       try { std::size_t used; x = std::stoll(v, &used); if (used != v.size()) throw 0; } catch (...) { fail(key + ": '" + v + "' is not an integer"); }
       return x;
     };
-    if (key == "VERSION" || key == "VIEWPOINT" || key == "TYPE") continue;
-    if (key == "FIELDS" || key == "COLUMNS") fields = vals;
+    if (key == "VERSION" || key == "VIEWPOINT") continue;
+    if (key == "TYPE") types = vals;
+    else if (key == "FIELDS" || key == "COLUMNS") fields = vals;
     else if (key == "SIZE") for (auto& v : vals) sizes.push_back(integer(v));
     else if (key == "COUNT") for (auto& v : vals) counts.push_back(integer(v));
     else if (key == "WIDTH" && vals.size() == 1) width = integer(vals[0]);
@@ -77,9 +78,20 @@ void prevalidate_pcd(const std::string& path) {
   if (points < 0) points = width * height;
   if (points != width * height) fail("POINTS " + std::to_string(points) + " != WIDTH x HEIGHT (" + std::to_string(width) + " x " + std::to_string(height) + ")");
   if (points > 2000000000LL) fail("POINTS " + std::to_string(points) + " is absurd (corrupt header?)");
+  // PCL 1.13 dereferences a null pointer for a TYPE it does not know ('N', or F of size 2: a
+  // fuzz finding), so TYPE is checked against SIZE here: I/U of 1, 2, 4 or 8 bytes, F of 4 or 8
+  if (!types.empty() && types.size() != fields.size())
+    fail("TYPE has " + std::to_string(types.size()) + " entries for " + std::to_string(fields.size()) + " FIELDS");
   std::uint64_t point_size = 0;
   for (std::size_t i = 0; i < sizes.size(); ++i) {
     if (sizes[i] != 1 && sizes[i] != 2 && sizes[i] != 4 && sizes[i] != 8) fail("SIZE " + std::to_string(sizes[i]) + " is not 1, 2, 4 or 8");
+    if (!types.empty()) {
+      const std::string& t = types[i];
+      if (t != "I" && t != "U" && t != "F")
+        fail("TYPE '" + t.substr(0, 10) + "' of field " + fields[i] + " is not I, U or F");
+      if (t == "F" && sizes[i] != 4 && sizes[i] != 8)
+        fail("field " + fields[i] + ": TYPE F needs SIZE 4 or 8 (got " + std::to_string(sizes[i]) + ")");
+    }
     if (counts[i] < 1) fail("COUNT must be >= 1");
     point_size += std::uint64_t(sizes[i]) * std::uint64_t(counts[i]);
   }

@@ -140,6 +140,21 @@ TEST(MalformedFiles, PcdAsciiBodyIsValidatedBeforePcl) {
       EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
     }
   }
+  // TYPE must be I, U or F and agree with SIZE (PCL 1.13 crashes on others: fuzz finding)
+  for (const auto& [types, expect] : std::vector<std::pair<std::string, std::string>>{
+           {"SIZE 2 4 4\nTYPE F N F\n", "TYPE F needs SIZE 4 or 8 (got 2)"},
+           {"SIZE 4 4 4\nTYPE F N F\n", "TYPE 'N' of field y is not I, U or F"},
+           {"SIZE 4 4 4\nTYPE F F\n", "TYPE has 2 entries for 3 FIELDS"}}) {
+    const std::string p = (dir / "t.pcd").string();
+    std::ofstream(p) << "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\n" << types
+                     << "COUNT 1 1 1\nWIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n0 0 0\n";
+    try {
+      read_cloud(p);
+      FAIL() << types;
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
   // a valid body with blank lines, nan and exponents still reads
   std::ofstream(dir / "ok.pcd") << head << "0 0 0\n\n1e-3 nan 2\n-1 1.5E2 3\n";
   EXPECT_EQ(read_cloud((dir / "ok.pcd").string()).width, 3u);
