@@ -33,7 +33,9 @@ int cmd_fit(FitArgs a) {
   bool has_normals = false;
   const auto cloud = tbsp::read_cloud_normals(a.cloud, &has_normals);
   if (cloud->empty()) throw tbsp::InvalidInput(a.cloud + ": the cloud is empty");
-  const std::vector<tbsp::FitMarker> markers = tbsp::load_markers_json(a.markers);
+  // no markers: the template must be roughly in place; it is aligned first (trimmed ICP)
+  const std::vector<tbsp::FitMarker> markers =
+      a.markers.empty() ? std::vector<tbsp::FitMarker>{} : tbsp::load_markers_json(a.markers);
   tbsp::RegionOfInterest roi;
   if (!a.roi.empty()) roi = tbsp::load_roi_json(a.roi);
   a.p.propagate_displacements = !a.no_prop;
@@ -140,7 +142,10 @@ void add_fit_commands(CLI::App& app, CommandTable& table) {
   auto* fitc = app.add_subcommand("fit", "fit a template mesh to a point cloud (thesis ch. 5)");
   fitc->add_option("--template", a->templ, "template mesh (.ply .obj .off .vtk)")->required()->check(CLI::ExistingFile);
   fitc->add_option("--cloud", a->cloud, "scan (.pcd, or .ply/.obj/.off/.vtk vertices); normals used if present")->required()->check(CLI::ExistingFile);
-  fitc->add_option("--markers", a->markers, "markers JSON (docs/fit_json.md)")->required()->check(CLI::ExistingFile);
+  fitc->add_option("--markers", a->markers,
+                   "markers JSON (docs/fit_json.md); without: the template must be roughly in place (within ~10 deg, "
+                   "~5 %) and is aligned to the scan first (rotation, scale, translation by trimmed ICP)")
+      ->check(CLI::ExistingFile);
   fitc->add_option("--out", a->out, "fitted mesh, written atomically")->required();
   fitc->add_option("--status", a->status, "per-vertex status text file");
   fitc->add_option("--report", a->report, "JSON report (iterations, timings, Hausdorff, RMS, coverage)");

@@ -120,6 +120,17 @@ nlohmann::json fit_report_json(const FitReport& r) {
                  {"max_move_p99", it.max_move}, {"seconds", it.seconds}, {"matching_seconds", it.matching_seconds}, {"solve_seconds", it.solve_seconds}, {"binned", it.binned}});
   j["history"] = h;
   j["scale"] = r.scale;
+  if (r.aligned_without_markers) {
+    nlohmann::json T = nlohmann::json::array();
+    for (int i = 0; i < 4; ++i) T.push_back({r.alignment(i, 0), r.alignment(i, 1), r.alignment(i, 2), r.alignment(i, 3)});
+    j["alignment"] = {{"matrix", T},
+                      {"rotation_deg", r.alignment_rotation_deg},
+                      {"scale", r.alignment_scale},
+                      {"iterations", r.alignment_iterations},
+                      {"rms", r.alignment_rms},
+                      {"auto_markers", r.auto_markers},
+                      {"seconds", r.t_alignment}};
+  }
   const auto& u = r.used;
   j["parameters"] = {{"max_match_distance", u.max_match_distance}, {"initial_match_distance", u.initial_match_distance},
                      {"max_normal_angle_deg", u.max_normal_angle_deg}, {"max_iterations", u.max_iterations},

@@ -135,3 +135,45 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   if (!std::getenv("TBSP_KEEP_TEST_OUTPUT")) std::filesystem::remove_all(dir);
   else std::printf("outputs kept in %s\n", dir.c_str());
 }
+
+// Without --markers the template must be roughly in place: it is aligned to the scan first
+// (trimmed ICP with scale) and the report says so. Scan: the bunny at ×1.04, offset by 2 % of
+// the diagonal, σ 0.2 % noise, 10 % outliers, a 25 % hole.
+TEST(CliFit, WithoutMarkersARoughlyPlacedTemplateIsAlignedThenFitted) {
+  const std::string tpath = test::shared("meshes/libigl__libigl-tutorial-data/bunny.off");
+  TBSP_REQUIRE_FILE(tpath);
+  const auto dir = test::temp_dir("cli_fit_nomarkers");
+  synth::ScenarioOptions o;
+  o.points = 15000;
+  o.bend_deg = o.twist_deg = 0;
+  o.scale = 1.04;
+  o.translation = Eigen::Vector3d(0.02, 0, 0);
+  const synth::Scenario s = synth::make_scenario(read_mesh(tpath), o);
+  pcl::PointCloud<pcl::PointNormal> c;
+  for (Eigen::Index i = 0; i < s.P.rows(); ++i) {
+    pcl::PointNormal p;
+    p.x = float(s.P(i, 0)); p.y = float(s.P(i, 1)); p.z = float(s.P(i, 2));
+    p.normal_x = float(s.N(i, 0)); p.normal_y = float(s.N(i, 1)); p.normal_z = float(s.N(i, 2));
+    c.push_back(p);
+  }
+  pcl::PCLPointCloud2 blob;
+  pcl::toPCLPointCloud2(c, blob);
+  const std::string cloud = (dir / "scan.pcd").string(), out = (dir / "fit.ply").string(), rep = (dir / "r.json").string();
+  write_cloud(cloud, blob);
+  std::string err;
+  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out + " --report " + rep, dir, &err), 0) << err;
+  nlohmann::json j;
+  std::ifstream(rep) >> j;
+  ASSERT_TRUE(j.contains("alignment")) << j.dump(1);
+  EXPECT_NEAR(j["alignment"]["scale"].get<double>(), 1.04, 0.01);
+  EXPECT_LT(j["alignment"]["rotation_deg"].get<double>(), 1.0);  // no rotation was applied
+  EXPECT_EQ(j["alignment"]["auto_markers"].get<int>(), 30);  // the second pass (FitParameters::auto_markers)
+  EXPECT_NEAR(j["scale"].get<double>(), 1.04, 0.01);           // its geodesic scale
+  TriMesh fit = read_mesh(out);
+  EXPECT_EQ(fit.F, s.templ.F);
+  const synth::ScenarioErrors e = synth::evaluate(s, fit);
+  std::printf("  no markers: clean Hausdorff %.3f%%, all-vertex mean %.3f%%, hole %.3f%%\n", 100 * e.hausdorff_clean_rel,
+              100 * e.all_mean_rel, 100 * e.hole_mean_rel);
+  EXPECT_LE(e.hausdorff_clean_rel, 0.01);
+  EXPECT_LE(e.hole_mean_rel, 0.01);
+}

@@ -5,6 +5,7 @@
 // of issue 3 for how they compare with the issue's targets).
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -70,6 +71,36 @@ FitParameters weight_one() {
   FitParameters p;
   p.propagation_weight = 1.0;
   return p;
+}
+
+// The template roughly in place, as a PCL user without markers has it: the scan is the bunny
+// bent by 10°, scaled ×1.05, offset by ~3.7 % of the diagonal and then turned by 8° about a
+// tilted axis through its centre (σ 0.2 % noise, 10 % outliers, 25 % hole as above).
+synth::Scenario bunny_roughly_placed(unsigned seed) {
+  synth::ScenarioOptions opt;
+  opt.bend_deg = 10;
+  opt.twist_deg = 0;
+  opt.scale = 1.05;
+  opt.translation = Eigen::Vector3d(0.03, -0.02, 0.01);
+  opt.markers = 30;
+  opt.seed = seed;
+  synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(8 * M_PI / 180, Eigen::Vector3d(1, 2, 0.5).normalized()).toRotationMatrix();
+  const Eigen::RowVector3d c = s.target.colwise().mean();
+  auto turn = [&](Eigen::MatrixX3d& X, bool about_centre) {
+    for (Eigen::Index i = 0; i < X.rows(); ++i) {
+      if (!X.row(i).allFinite()) continue;  // (clean rows of outliers are NaN)
+      const Eigen::RowVector3d x = X.row(i);
+      X.row(i) = about_centre ? Eigen::RowVector3d((x - c) * R.transpose() + c) : Eigen::RowVector3d(x * R.transpose());
+    }
+  };
+  turn(s.target, true);
+  turn(s.P, true);
+  turn(s.clean, true);
+  turn(s.N, false);
+  for (auto& m : s.markers)
+    if (m.cloud_index < 0) m.position = R * (m.position - c.transpose()) + c.transpose();
+  return s;
 }
 }  // namespace
 
@@ -275,4 +306,35 @@ TEST(TemplateFittingGroundTruth, BinnedMatchingAtLargeRadiiGivesTheExactFit) {
   EXPECT_LT(mean_diff, 0.001);  // 0.1 % of the diagonal
   EXPECT_LT(std::abs(eb.hausdorff_clean_rel - ea.hausdorff_clean_rel), 0.001);
   EXPECT_LT(std::abs(eb.hole_mean_rel - ea.hole_mean_rel), 0.001);
+}
+
+// Without markers (issue: fitting v2): the template is first aligned by trimmed ICP with scale,
+// fitted by the matches alone, and 30 of its matched vertices then steer a second fit as
+// markers (FitParameters::auto_markers). Measured over seeds 1-5 of the roughly placed bunny:
+//   alignment 9.0-9.2° (8° turn + the 10° bend), scale 1.059-1.060 (truth 1.05: a similarity
+//   cannot follow the bend and its scale is biased by +1 %; the second pass inherits most of it,
+//   1.054-1.057);
+//   without markers: clean Hausdorff 0.61-0.93 %, p99 0.28-0.38 %, hole 0.99-1.17 %, 0 flips;
+//   with the 30 scenario markers:  0.38-0.50 %,        0.19-0.22 %,      0.56-0.71 %.
+// The issue's target (the accuracy of the marker fit) is not met yet: the bounds below are the
+// measured spread with a margin, so that a regression shows.
+TEST(TemplateFittingGroundTruth, WithoutMarkersARoughlyPlacedTemplateIsAlignedAndFitted) {
+  TBSP_REQUIRE_FILE(test::shared(kBunny));
+  for (unsigned seed : {1u, 2u}) {
+    synth::Scenario s = bunny_roughly_placed(seed);
+    s.markers.clear();
+    const Outcome o = run(s, weight_one());
+    std::printf("  seed %u alignment: %.2f deg, scale %.4f, %d iterations, rms %.3g, first pass %.3f s\n", seed,
+                o.report.alignment_rotation_deg, o.report.alignment_scale, o.report.alignment_iterations,
+                o.report.alignment_rms, o.report.t_alignment);
+    EXPECT_TRUE(o.report.aligned_without_markers) << "seed " << seed;
+    EXPECT_EQ(o.report.auto_markers, 30) << "seed " << seed;
+    EXPECT_NEAR(o.report.alignment_rotation_deg, 9.0, 1.5) << "seed " << seed;
+    EXPECT_NEAR(o.report.alignment_scale, 1.05, 0.015) << "seed " << seed;
+    EXPECT_NEAR(o.report.scale, 1.05, 0.012) << "seed " << seed;
+    EXPECT_LE(o.err.hausdorff_clean_rel, 0.011) << "seed " << seed;
+    EXPECT_LE(o.clean_p99, 0.0045) << "seed " << seed;
+    EXPECT_LE(o.err.hole_mean_rel, 0.013) << "seed " << seed;
+    EXPECT_EQ(o.flipped_vs_truth, 0) << "seed " << seed;
+  }
 }

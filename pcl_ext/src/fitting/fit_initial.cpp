@@ -32,13 +32,13 @@ double estimate_scale(FitState& s) {
   // rest-pose geodesics between the markers: the rotation field's skeleton has them already
   const ConstraintGraph* graph = s.D.rotationGraph();
   const Eigen::MatrixXd D0 =
-      graph && graph->nodes == dm ? graph->geodesic : geodesic_distance_matrix(s.templ.V, s.templ.F, dm);
+      graph && graph->nodes == dm ? graph->geodesic : geodesic_distance_matrix(s.templ().V, s.templ().F, dm);
   // the shortest paths between the markers are searched once, on the first posed shape; the
   // later rounds re-measure the same curves on the re-solved shape (a uniform rescale keeps
   // them shortest; the search is the expensive part)
   std::vector<std::vector<std::vector<int>>> paths;
   auto ratio_of = [&](const Eigen::MatrixX3d& X) {
-    if (paths.empty()) paths = geodesic_paths(X, s.templ.F, dm);
+    if (paths.empty()) paths = geodesic_paths(X, s.templ().F, dm);
     double sum = 0;
     int cnt = 0;
     for (Eigen::Index a = 0; a < D0.rows(); ++a)
@@ -69,7 +69,18 @@ void initial_pose(FitState& s) {
   FitReport& rep = s.rep;
   report_progress(s.progress, 0.05, "initial deformation");
   auto t0 = Clock::now();
-  s.D.setMesh(s.templ);
+  s.D.setMesh(s.templ());
+  if (s.markers.empty()) {
+    // aligned by align_without_markers: the fit starts from the aligned template, the
+    // matches are the only constraints (no rotation field: it interpolates marker rotations)
+    s.D.setUseRotationField(false);
+    s.V = s.templ().V;
+    rep.scale = rep.alignment_scale;
+    rep.t_initial = seconds_since(t0);
+    s.V0 = s.V;
+    s.F = s.templ().F;
+    return;
+  }
   s.addMarkers(s.D, s.u.marker_weight);
   bool field = s.u.rotation_field;
   if (field) {
@@ -96,7 +107,7 @@ void initial_pose(FitState& s) {
   rep.t_scale = seconds_since(t0);
   if (!s.D.lastRotations().empty()) s.D.setRotations(s.D.lastRotations());  // freeze the field
   s.V0 = s.V;
-  s.F = s.templ.F;
+  s.F = s.templ().F;
 }
 
 void orient_cloud_normals(FitState& s) {

@@ -44,7 +44,7 @@ void refine_rotation_field(FitState& s, const Eigen::SparseMatrix<double>& Ct) {
     Eigen::Matrix3d S = Eigen::Matrix3d::Zero();
     for (Eigen::SparseMatrix<double>::InnerIterator itc(Ct, k); itc; ++itc) {
       if (itc.row() == k) continue;
-      const Eigen::Vector3d e0 = (s.templ.V.row(itc.row()) - s.templ.V.row(k)).transpose();
+      const Eigen::Vector3d e0 = (s.templ().V.row(itc.row()) - s.templ().V.row(k)).transpose();
       const Eigen::Vector3d e1 = (V.row(itc.row()) - V.row(k)).transpose();
       S += std::abs(itc.value()) * e1 * e0.transpose();
     }
@@ -53,7 +53,7 @@ void refine_rotation_field(FitState& s, const Eigen::SparseMatrix<double>& Ct) {
   }
   try {
     RotationField rf;
-    rf.compute(s.templ.V, s.F, nodes);
+    rf.compute(s.templ().V, s.F, nodes);
     s.D.setRotations(rf.interpolate(rots));
   } catch (const InvalidInput&) {
     // a component without nodes: keep the previous field
@@ -110,7 +110,7 @@ bool iterate_fit(FitState& s) {
   Eigen::MatrixX3d& V = s.V;
   s.matched.assign(std::size_t(V.rows()), 0);
   s.target = V;
-  const Eigen::SparseMatrix<double> Ct = cotangent_matrix(s.templ.V, s.templ.F);  // for refine_rotations
+  const Eigen::SparseMatrix<double> Ct = cotangent_matrix(s.templ().V, s.templ().F);  // for refine_rotations
   Iterations st;
   bool converged = false;
   const auto t_it = Clock::now();

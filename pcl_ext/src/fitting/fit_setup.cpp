@@ -1,5 +1,4 @@
 // Set-up of a fit: the cloud (finite points, ROI, normals), derived parameters, markers, mask.
-#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 
@@ -19,32 +18,6 @@ bool inside(const Eigen::Vector3d& p, const std::vector<Sphere>& s, const std::v
   for (const auto& x : b)
     if ((p.array() >= x.min.array()).all() && (p.array() <= x.max.array()).all()) return true;
   return false;
-}
-
-// PCA normals over k nearest neighbours (unoriented).
-Eigen::MatrixX3d pca_normals(const PointSearch& tree, int k) {
-  const Eigen::MatrixX3d& P = tree.points();
-  Eigen::MatrixX3d N(P.rows(), 3);
-#pragma omp parallel
-  {
-    std::vector<Eigen::Index> idx;
-    std::vector<double> d2;
-#pragma omp for schedule(dynamic, 512)
-    for (Eigen::Index i = 0; i < P.rows(); ++i) {
-      tree.knn(P.row(i).transpose(), k, idx, d2);
-      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-      for (auto j : idx) mean += P.row(j).transpose();
-      mean /= double(std::max<std::size_t>(idx.size(), 1));
-      Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
-      for (auto j : idx) {
-        const Eigen::Vector3d d = P.row(j).transpose() - mean;
-        C += d * d.transpose();
-      }
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
-      N.row(i) = es.eigenvectors().col(0).transpose();
-    }
-  }
-  return N;
 }
 
 // The automatic values (0 = derive from the data) of the parameters used.
@@ -138,7 +111,7 @@ void prepare_cloud(FitState& s, const Eigen::MatrixX3d& P_in, const Eigen::Matri
   t0 = Clock::now();
   s.orient = orient_normals;
   if (N_in.rows() == 0) {
-    s.N = pca_normals(s.search, params.normal_neighbours);
+    s.N = estimate_normals_pca(s.search, params.normal_neighbours);
     rep.normals_estimated = s.orient = true;
   } else {
     s.N.resize(np, 3);
@@ -151,10 +124,7 @@ void prepare_cloud(FitState& s, const Eigen::MatrixX3d& P_in, const Eigen::Matri
 void prepare_markers(FitState& s, const Eigen::MatrixX3d& P_in, const RegionOfInterest& roi) {
   const std::string& who = s.who;
   const auto& markers = s.markers;
-  if (markers.empty())
-    throw InvalidInput(who + "no markers: give at least one template vertex <-> cloud point correspondence (3 or more "
-                             "for the rotation field)");
-  const Eigen::Index nv0 = s.templ.V.rows();
+  const Eigen::Index nv0 = s.templ().V.rows();
   for (std::size_t k = 0; k < markers.size(); ++k) {
     const auto& m = markers[k];
     const std::string w = who + "marker " + std::to_string(k) + ": ";
@@ -196,7 +166,7 @@ void prepare_markers(FitState& s, const Eigen::MatrixX3d& P_in, const RegionOfIn
     s.masked[std::size_t(v)] = 1;
   }
   for (Eigen::Index v = 0; v < nv0; ++v)
-    if (inside(s.templ.V.row(v).transpose(), roi.exclude_template_spheres, roi.exclude_template_boxes))
+    if (inside(s.templ().V.row(v).transpose(), roi.exclude_template_spheres, roi.exclude_template_boxes))
       s.masked[std::size_t(v)] = 1;
   if (nv0 > 0 && std::all_of(s.masked.begin(), s.masked.end(), [](char c) { return c != 0; }))
     throw InvalidInput(who + "the region of interest excludes every template vertex: nothing would be fitted to the data; "
@@ -232,6 +202,7 @@ bool FitParameters::isValid(std::string* why) const {
   if (!(detail_surface_weight >= 0)) return bad("detail_surface_weight must be >= 0 (0 = off)");
   if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
   if (max_vertices < 4) return bad("max_vertices must be >= 4");
+  if (auto_markers < 0 || auto_markers > 1000) return bad("auto_markers must be in 0..1000 (0 = one pass)");
   return true;
 }
 

@@ -2,6 +2,7 @@
 // Internal: the state the stages of fit_template share (template_fitter.cpp runs them in order).
 // One stage per file:
 //   fit_setup.cpp        finite points, ROI, normals, derived parameters, markers, template mask
+//   fit_alignment.cpp    without markers: similarity alignment (trimmed ICP with scale)
 //   fit_initial.cpp      stage 1: initial deformation from the markers, global scale (§5.2);
 //                        orientation of estimated normals by the posed template
 //   fit_matching.cpp     the §5.3 kernel: matching every vertex against the cloud
@@ -32,9 +33,8 @@ namespace fit_impl {
 struct FitState {
   FitState(const TriMesh& t, const std::vector<FitMarker>& m, const ProgressCallback& p, FitReport& r,
            std::vector<VertexStatus>& st)
-      : templ(t), markers(m), progress(p), rep(r), status(st), u(r.used) {}
+      : markers(m), progress(p), rep(r), status(st), u(r.used), templ_(&t) {}
 
-  const TriMesh& templ;
   const std::vector<FitMarker>& markers;
   const ProgressCallback& progress;
   FitReport& rep;
@@ -67,6 +67,10 @@ struct FitState {
   std::vector<int> prop_ids;         ///< per vertex: id of its propagated constraint (-1: none)
   bool propagation_handled = false;  ///< propagation decided in the loop (done or skipped for good)
 
+  /// The template the stages fit: the user's, or its similarity alignment when there are no
+  /// markers (align_without_markers).
+  const TriMesh& templ() const { return *templ_; }
+  void useTemplate(const TriMesh& t) { templ_ = &t; }
   /// The markers as constraints of d (weight × each marker's own weight).
   void addMarkers(LaplacianDeformer& d, double weight) const;
   /// Cloud normals for the fold-over checks: estimated normals made consistent (once, on first
@@ -74,6 +78,7 @@ struct FitState {
   const Eigen::MatrixX3d& consistentNormals();
 
  private:
+  const TriMesh* templ_;
   Eigen::MatrixX3d NC_;
   bool nc_ready_ = false;
 };
@@ -84,6 +89,11 @@ void prepare_cloud(FitState& s, const Eigen::MatrixX3d& P_in, const Eigen::Matri
                    const FitParameters& params, bool orient_normals);
 /// Marker targets and the template mask; throws InvalidInput naming the marker / vertex.
 void prepare_markers(FitState& s, const Eigen::MatrixX3d& P_in, const RegionOfInterest& roi);
+
+// ---- fit_alignment.cpp
+/// Without markers: similarity alignment of s.templ() to the cloud by trimmed ICP (cloud ->
+/// template, Umeyama); writes the aligned template and the report's alignment fields.
+void align_without_markers(FitState& s, TriMesh& aligned);
 
 // ---- fit_initial.cpp
 /// Stage 1: initial deformation from the markers, global scale; sets V, V0, F; freezes the field.

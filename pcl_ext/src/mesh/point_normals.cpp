@@ -1,5 +1,6 @@
 #include "tbsp/mesh/point_normals.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -134,6 +135,32 @@ NormalOrientationResult orient_normals_consistently(const PointSearch& tree, Eig
     }
   }
   return res;
+}
+
+Eigen::MatrixX3d estimate_normals_pca(const PointSearch& tree, int k) {
+  if (k < 3) throw InvalidInput("[tbsp::estimate_normals_pca] k must be >= 3 (got " + std::to_string(k) + ")");
+  const Eigen::MatrixX3d& P = tree.points();
+  Eigen::MatrixX3d N(P.rows(), 3);
+#pragma omp parallel
+  {
+    std::vector<Eigen::Index> idx;
+    std::vector<double> d2;
+#pragma omp for schedule(dynamic, 512)
+    for (Eigen::Index i = 0; i < P.rows(); ++i) {
+      tree.knn(P.row(i).transpose(), k, idx, d2);
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (auto j : idx) mean += P.row(j).transpose();
+      mean /= double(std::max<std::size_t>(idx.size(), 1));
+      Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+      for (auto j : idx) {
+        const Eigen::Vector3d d = P.row(j).transpose() - mean;
+        C += d * d.transpose();
+      }
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
+      N.row(i) = es.eigenvectors().col(0).transpose();
+    }
+  }
+  return N;
 }
 
 }  // namespace tbsp

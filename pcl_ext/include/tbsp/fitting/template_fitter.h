@@ -3,7 +3,8 @@
 /// \brief Template fitting to point clouds (thesis ch. 5 + §5.5): the non-template kernel behind
 /// tbsp::TemplateFitting<PointT>. Works on Eigen points; see template_fitting.h for the PCL API.
 ///
-/// Pipeline (all automatic after the markers):
+/// Pipeline (all automatic after the markers; without markers a similarity alignment by trimmed
+/// ICP comes first and steps 1-2 are skipped):
 ///  1. initial deformation with the rotation field (eq. 3.12) from the markers;
 ///  2. global scale λ from ratios of Dijkstra geodesics between markers (§5.2), iterated to a
 ///     fixed point (the thesis does one step; data ×3 out of scale needs a few) and re-solve;
@@ -175,6 +176,12 @@ struct FitParameters {
   bool remeshing = false;               ///< §5.5.2 (needs laplacian_updating; changes connectivity)
   double subdivision_error = 0;         ///< ε; 0: 0.15 % d
   int max_vertices = 60000;             ///< remeshing stops growing the mesh beyond this
+  /// Without markers (and without remeshing): after the aligned fit, this many of its matched
+  /// vertices (farthest-point sampled over the template) become free markers at their fitted
+  /// positions, and the fit runs again from the template with them — the rotation field and the
+  /// geodesic scale of §5.2 then apply as with user markers. 0: one pass (the aligned fit).
+  /// Range 0..1000; default 30.
+  int auto_markers = 30;
   bool fairing = false;                 ///< §5.5.3
   double fairing_lambda = 0.5;          ///< λ of eq. 5.2
   int fairing_steps = 2;                ///< per iteration
@@ -224,7 +231,15 @@ struct FitReport {
   std::string message;
   int iterations = 0;
   std::vector<FitIteration> history;
-  double scale = 1.0;
+  double scale = 1.0;                    ///< global scale λ (§5.2; without markers: the alignment's scale)
+  /// without markers: the similarity (rotation, uniform scale, translation; template → cloud)
+  /// found by trimmed ICP before the fit, its rotation angle, scale, iterations and the RMS
+  /// distance of the kept pairs (cloud point → nearest template vertex) at the end
+  bool aligned_without_markers = false;
+  Eigen::Matrix4d alignment = Eigen::Matrix4d::Identity();
+  double alignment_rotation_deg = 0, alignment_scale = 1, alignment_rms = 0;
+  int alignment_iterations = 0;
+  int auto_markers = 0;  ///< markers taken from the aligned fit for the second pass (FitParameters::auto_markers)
   FitParameters used;                    ///< parameters with the derived values filled in
   Eigen::Index points_total = 0, points_skipped_nonfinite = 0, points_excluded = 0;
   bool normals_estimated = false;
@@ -251,7 +266,7 @@ struct FitReport {
   /// before / after, and the edges collapsed
   int pleat_faces_before = 0, pleat_faces_after = 0, pleat_collapses = 0;
   // timings (s)
-  double t_normals = 0, t_search = 0, t_initial = 0, t_scale = 0, t_iterations = 0, t_matching = 0,
+  double t_normals = 0, t_search = 0, t_alignment = 0, t_initial = 0, t_scale = 0, t_iterations = 0, t_matching = 0,
          t_solve = 0, t_propagation = 0, t_detail = 0, t_remeshing = 0, t_fairing = 0, t_metrics = 0, t_total = 0;
   int detail_iterations_run = 0;         ///< matching / solve steps of the detail rounds, all rounds
   Eigen::Index detail_surface_constraints = 0;  ///< data -> surface constraints, all detail rounds
@@ -265,7 +280,9 @@ struct FitReport {
 /// Non-finite points are skipped and counted.
 /// \param templ the template (a valid triangle mesh).
 /// \param P, N the cloud's points and normals (see above).
-/// \param markers template vertex ↔ cloud point / position correspondences (at least one).
+/// \param markers template vertex ↔ cloud point / position correspondences; empty: the template
+/// is roughly in place and is first aligned to the cloud (rotation, uniform scale, translation;
+/// trimmed ICP, FitReport::alignment), then fitted with the matches alone.
 /// \param roi what is excluded from matching (template vertices, cloud points).
 /// \param params the parameters (validated: FitParameters::isValid); the values used are in the report.
 /// \param progress called with (fraction, stage); returning false cancels (tbsp::Cancelled).

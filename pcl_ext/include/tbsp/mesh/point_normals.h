@@ -1,6 +1,6 @@
 #pragma once
 /// \file point_normals.h
-/// \brief Consistent orientation of estimated point-cloud normals.
+/// \brief Point-cloud normals: PCA estimation and consistent orientation.
 
 #include <Eigen/Core>
 
@@ -39,5 +39,16 @@ struct NormalOrientationResult {
 NormalOrientationResult orient_normals_consistently(const PointSearch& tree, Eigen::MatrixX3d& N,
                                                     const Eigen::VectorXd& confidence, int k = 16,
                                                     double min_alignment = 0.7, double max_normal_offset = 0.5);
+
+/// \brief Unoriented normals by PCA: per point of `tree`, the eigenvector of the smallest
+/// eigenvalue of the covariance of its k nearest neighbours (the point included), unit length,
+/// sign arbitrary (orient them with a reference, then orient_normals_consistently).
+/// A point whose neighbours are all one point gets an arbitrary unit vector.
+/// O(n k) after the tree; parallel over points; deterministic.
+/// \param tree the points (PointSearch over #P by 3).
+/// \param k neighbours per point (≥ 3; the template fitter uses FitParameters::normal_neighbours).
+/// \returns #P by 3 unit normals.
+/// \throws InvalidInput if k < 3.
+Eigen::MatrixX3d estimate_normals_pca(const PointSearch& tree, int k);
 
 }  // namespace tbsp
