@@ -25,15 +25,9 @@ int run(const std::string& args, const std::filesystem::path& dir, std::string* 
   }
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
 }
-}  // namespace
 
-TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
-  const std::string tpath = test::shared("meshes/libigl__libigl-tutorial-data/bunny.off");
-  TBSP_REQUIRE_FILE(tpath);
-  const auto dir = test::temp_dir("cli_fit");
-  synth::ScenarioOptions o;
-  o.points = 15000;
-  const synth::Scenario s = synth::make_scenario(read_mesh(tpath), o);
+// the scenario's cloud with its normals as a PCD
+void write_scan(const synth::Scenario& s, const std::string& path) {
   pcl::PointCloud<pcl::PointNormal> c;
   for (Eigen::Index i = 0; i < s.P.rows(); ++i) {
     pcl::PointNormal p;
@@ -43,8 +37,19 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   }
   pcl::PCLPointCloud2 blob;
   pcl::toPCLPointCloud2(c, blob);
+  write_cloud(path, blob);
+}
+}  // namespace
+
+TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
+  const std::string tpath = test::shared("meshes/libigl__libigl-tutorial-data/bunny.off");
+  TBSP_REQUIRE_FILE(tpath);
+  const auto dir = test::temp_dir("cli_fit");
+  synth::ScenarioOptions o;
+  o.points = 15000;
+  const synth::Scenario s = synth::make_scenario(read_mesh(tpath), o);
   const std::string cloud = (dir / "scan.pcd").string();
-  write_cloud(cloud, blob);
+  write_scan(s, cloud);
   nlohmann::json mk;
   for (const auto& m : s.markers) mk["markers"].push_back({{"template_vertex", m.template_vertex}, {"cloud_index", m.cloud_index}});
   std::ofstream(dir / "markers.json") << mk.dump();
@@ -149,17 +154,8 @@ TEST(CliFit, WithoutMarkersARoughlyPlacedTemplateIsAlignedThenFitted) {
   o.scale = 1.04;
   o.translation = Eigen::Vector3d(0.02, 0, 0);
   const synth::Scenario s = synth::make_scenario(read_mesh(tpath), o);
-  pcl::PointCloud<pcl::PointNormal> c;
-  for (Eigen::Index i = 0; i < s.P.rows(); ++i) {
-    pcl::PointNormal p;
-    p.x = float(s.P(i, 0)); p.y = float(s.P(i, 1)); p.z = float(s.P(i, 2));
-    p.normal_x = float(s.N(i, 0)); p.normal_y = float(s.N(i, 1)); p.normal_z = float(s.N(i, 2));
-    c.push_back(p);
-  }
-  pcl::PCLPointCloud2 blob;
-  pcl::toPCLPointCloud2(c, blob);
   const std::string cloud = (dir / "scan.pcd").string(), out = (dir / "fit.ply").string(), rep = (dir / "r.json").string();
-  write_cloud(cloud, blob);
+  write_scan(s, cloud);
   std::string err;
   ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out + " --report " + rep, dir, &err), 0) << err;
   nlohmann::json j;
