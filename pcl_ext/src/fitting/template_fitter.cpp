@@ -62,7 +62,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     return [&progress, lo, hi](double f, const std::string& stage) { return progress(lo + (hi - lo) * f, stage); };
   };
   FitParameters first = params;
-  first.detail_rounds = 0;  // (2 rounds here changed the result by < 0.02 %)
+  first.detail_rounds = 0;  // (2 rounds here: clean Hausdorff 0.50-0.91 % for 0.61-0.93 % over the
+                            // roughly placed bunny seeds 1-5, the same scale bias, twice the time)
   TriMesh r1;
   std::vector<VertexStatus> s1;
   const FitReport rep1 = fit_once(templ, P_in, N_in, {}, roi, first, r1, s1, part(0.0, 0.4), orient_normals);
