@@ -40,13 +40,18 @@ void align_without_markers(FitState& s, TriMesh& aligned) {
   std::vector<double> dist(static_cast<std::size_t>(m));
   int it = 0;
   double rms = 0;
+  // one tree over the rest template: the nearest vertex of T·rest to p is the nearest vertex of
+  // rest to T⁻¹p (a similarity keeps the order of distances)
+  const PointSearch rest_search(rest.V);
   for (; it < 60; ++it) {
-    const PointSearch vt(X);
+    const Eigen::Matrix3d A = T.topLeftCorner<3, 3>().inverse();
+    const Eigen::Vector3d t = T.topRightCorner<3, 1>();
 #pragma omp parallel for schedule(static)
     for (Eigen::Index k = 0; k < m; ++k) {
-      double d2 = 0;
-      nearest[std::size_t(k)] = vt.nearest(s.P.row(sample[std::size_t(k)]).transpose(), &d2);
-      dist[std::size_t(k)] = std::sqrt(d2);
+      const Eigen::Vector3d p = s.P.row(sample[std::size_t(k)]).transpose();
+      const Eigen::Index v = rest_search.nearest(A * (p - t));
+      nearest[std::size_t(k)] = v;
+      dist[std::size_t(k)] = v >= 0 ? (p - X.row(v).transpose()).norm() : 0.0;
     }
     std::vector<double> sorted = dist;
     const std::size_t keep = std::max<std::size_t>(3, std::size_t(0.9 * double(m)));

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <vector>
 
 #include "fit_state.h"
@@ -117,19 +118,33 @@ void detail_rounds(FitState& s) {
     // support_points × (r_d / r)² effective points (the count stage 2's kernel would see in the
     // same patch) gets least-squares weight ∝ n_eff — at the rim of holes one or two noisy
     // points otherwise pull it off the surface
+    // the tracked points' closest points on the current fit, a search over them and the face
+    // normals: built for the support weights and reused by the first iteration (the fit has
+    // not moved in between), rebuilt after every solve
+    struct ResidualIndex {
+      Eigen::MatrixX3d C, FN;
+      PointSearch search;
+    };
+    auto index_residuals = [&]() {
+      ResidualIndex x;
+      x.C = tracked_closest();
+      x.search = PointSearch(x.C);
+      x.FN = face_normals(V, F);
+      return x;
+    };
+    std::optional<ResidualIndex> index;
     Eigen::VectorXd dscale = Eigen::VectorXd::Ones(V.rows());
     if (u.detail_residual_matching && u.support_points > 0) {
       const double need = u.support_points * (rd / r) * (rd / r);
-      const Eigen::MatrixX3d C = tracked_closest();
-      const PointSearch csearch(C);
-      const Eigen::MatrixX3d FN0 = face_normals(V, F);
+      index = index_residuals();
+      const ResidualIndex& x = *index;
 #pragma omp parallel
       {
         std::vector<std::pair<Eigen::Index, double>> nb;
 #pragma omp for schedule(dynamic, 256)
         for (Eigen::Index j = 0; j < V.rows(); ++j) {
           if (status[std::size_t(j)] != VertexStatus::Matched) continue;
-          const ResidualSums a = residual_sums(csearch, C, FN0, V.row(j).transpose(), nb);
+          const ResidualSums a = residual_sums(x.search, x.C, x.FN, V.row(j).transpose(), nb);
           dscale(j) = a.sw2 > 0 ? std::min(1.0, a.sw * a.sw / a.sw2 / need) : 1.0;
         }
       }
@@ -199,9 +214,8 @@ void detail_rounds(FitState& s) {
           }
         }
         // target = vertex + kernel-weighted mean of the residuals p_k - c_k
-        const Eigen::MatrixX3d C = tracked_closest();
-        const PointSearch csearch(C);
-        const Eigen::MatrixX3d FNd = face_normals(V, F);
+        if (k > 0 || !index) index = index_residuals();
+        const ResidualIndex& x = *index;
 #pragma omp parallel
         {
           std::vector<std::pair<Eigen::Index, double>> nb;
@@ -209,7 +223,7 @@ void detail_rounds(FitState& s) {
           for (Eigen::Index j = 0; j < V.rows(); ++j) {
             if (ids[std::size_t(j)] < 0) continue;
             const Eigen::Vector3d vj = V.row(j).transpose();
-            const ResidualSums a = residual_sums(csearch, C, FNd, vj, nb);
+            const ResidualSums a = residual_sums(x.search, x.C, x.FN, vj, nb);
             if (a.sw <= 0) continue;
             Eigen::Vector3d m = a.sr / a.sw;
             if (m.norm() > r) m *= r / m.norm();
