@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "tbsp/core/error.h"
 #include "tbsp/mesh/mesh_validation.h"
 
