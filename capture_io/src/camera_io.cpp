@@ -1,5 +1,6 @@
 #include "tbsp/io/camera_io.h"
 
+#include <cmath>
 #include <filesystem>
 #include <iomanip>
 #include <map>
@@ -282,6 +283,97 @@ void write_projection_matrix(const std::string& path, const Camera& c) {
     os << "\n";
   }
   write_text_file_atomic(path, os.str());
+}
+
+RectifiedPairCalibration read_middlebury_stereo_calib(const std::string& path) {
+  auto tb = detail::TextBuffer::load(path);
+  RectifiedPairCalibration c;
+  bool have_cam0 = false, have_cam1 = false, have_baseline = false, have_doffs = false;
+  double f1 = 0, cy1 = 0;
+  std::map<std::string, int> seen;
+  std::string_view line;
+  while (tb.nextLine(line)) {
+    const int ln = tb.line() - 1;
+    auto fail = [&](const std::string& m) -> void { throw FileError(path + ":" + std::to_string(ln) + ": " + m); };
+    std::string l(line);
+    const auto first = l.find_first_not_of(" \t");
+    if (first == std::string::npos || l[first] == '#') continue;
+    const auto eq = l.find('=');
+    if (eq == std::string::npos) fail("expected 'key=value' (Middlebury calib.txt), got '" + l.substr(0, 60) + "'");
+    std::string key = l.substr(0, eq), value = l.substr(eq + 1);
+    key.erase(0, key.find_first_not_of(" \t"));
+    key.erase(key.find_last_not_of(" \t") + 1);
+    if (seen[key]++) fail("key '" + key + "' appears twice");
+    if (key == "cam0" || key == "cam1") {
+      const auto a = value.find('['), b = value.rfind(']');
+      if (a == std::string::npos || b == std::string::npos || b < a) fail(key + ": expected a matrix in brackets, [f 0 cx; 0 f cy; 0 0 1]");
+      std::string inner = value.substr(a + 1, b - a - 1);
+      int rows = 1;
+      for (char& ch : inner)
+        if (ch == ';') {
+          ch = ' ';
+          ++rows;
+        }
+      std::istringstream is(inner);
+      std::vector<double> v;
+      std::string tok;
+      while (is >> tok) {
+        double x;
+        if (!detail::parse_double(tok, x) || !std::isfinite(x)) fail(key + ": '" + tok.substr(0, 30) + "' is not a number");
+        v.push_back(x);
+      }
+      if (rows != 3 || v.size() != 9) fail(key + ": expected 3 rows of 3 numbers separated by ';', got " + std::to_string(v.size()) + " numbers");
+      if (!(v[0] > 0) || std::abs(v[0] - v[4]) > 1e-6 * v[0] || v[1] != 0 || v[3] != 0 || v[6] != 0 || v[7] != 0 || v[8] != 1)
+        fail(key + ": expected [f 0 cx; 0 f cy; 0 0 1] with f > 0 (a rectified pair's intrinsics)");
+      if (key == "cam0") {
+        c.f = v[0];
+        c.cx0 = v[2];
+        c.cy = v[5];
+        have_cam0 = true;
+      } else {
+        f1 = v[0];
+        c.cx1 = v[2];
+        cy1 = v[5];
+        have_cam1 = true;
+      }
+      continue;
+    }
+    double x;
+    std::string vt = value;
+    vt.erase(0, vt.find_first_not_of(" \t"));
+    vt.erase(vt.find_last_not_of(" \t\r") + 1);
+    if (!detail::parse_double(vt, x) || !std::isfinite(x)) fail(key + ": '" + vt.substr(0, 30) + "' is not a number");
+    auto as_int = [&](int& out) {
+      if (x < 0 || x > 1e6 || x != std::floor(x)) fail(key + " must be a non-negative integer, got " + vt.substr(0, 30));
+      out = static_cast<int>(x);
+    };
+    if (key == "doffs") {
+      c.doffs = x;
+      have_doffs = true;
+    } else if (key == "baseline") {
+      if (!(x > 0)) fail("baseline must be > 0, got " + vt.substr(0, 30));
+      c.baseline = x;
+      have_baseline = true;
+    } else if (key == "width") {
+      as_int(c.width);
+    } else if (key == "height") {
+      as_int(c.height);
+    } else if (key == "ndisp") {
+      as_int(c.ndisp);
+    } else if (key != "vmin" && key != "vmax" && key != "isint" && key != "dyavg" && key != "dymax") {
+      fail("unknown key '" + key.substr(0, 30) + "' (Middlebury calib.txt keys: cam0 cam1 doffs baseline width height ndisp vmin vmax isint dyavg dymax)");
+    }
+  }
+  if (!have_cam0 || !have_cam1 || !have_baseline)
+    throw FileError(path + ": missing " + std::string(!have_cam0 ? "cam0" : (!have_cam1 ? "cam1" : "baseline")) +
+                    " (a Middlebury calib.txt needs cam0, cam1 and baseline)");
+  if (std::abs(f1 - c.f) > 1e-6 * c.f || std::abs(cy1 - c.cy) > 1e-6 * std::max(1.0, std::abs(c.cy)))
+    throw FileError(path + ": cam0 and cam1 differ in f or cy: the pair is not rectified");
+  if (!have_doffs) c.doffs = c.cx1 - c.cx0;
+  if (std::abs(c.doffs - (c.cx1 - c.cx0)) > 0.01)
+    throw FileError(path + ": doffs = " + std::to_string(c.doffs) + " but cx1 - cx0 = " + std::to_string(c.cx1 - c.cx0) +
+                    ": fix doffs or the principal points");
+  return c;
 }
 
 }  // namespace tbsp

@@ -2,6 +2,7 @@
 
 #include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
+#include <pcl/io/ply_io.h>
 
 #include <algorithm>
 #include <cctype>
@@ -219,6 +220,18 @@ void write_cloud(const std::string& path, const pcl::PCLPointCloud2& cloud, bool
     return;
   }
   if (e != "ply") throw FileError("cannot write cloud '" + path + "': use .pcd or .ply");
+  // Fields beyond x y z and normals (colour, confidence, ...): PCL's PLY writer keeps them all.
+  bool extra = false;
+  for (const auto& f : cloud.fields)
+    extra |= f.name != "x" && f.name != "y" && f.name != "z" && f.name != "normal_x" && f.name != "normal_y" && f.name != "normal_z" &&
+             f.name != "curvature" && f.name.rfind("_", 0) != 0;
+  if (extra) {
+    atomic_write_with(path, [&](const std::string& tmp) {
+      pcl::PLYWriter w;
+      return w.write(tmp, cloud, Eigen::Vector4f::Zero(), Eigen::Quaternionf::Identity(), binary, false) == 0;
+    });
+    return;
+  }
   TriMesh m;
   pcl::PointCloud<pcl::PointXYZ> xyz;
   pcl::fromPCLPointCloud2(cloud, xyz);

@@ -89,7 +89,8 @@ TriMesh read_ply(TextBuffer& buf) {
       nv = e.count;
       mb.v.reserve(std::size_t(e.count));
     }
-    if ((is_face || is_strip) && iface < 0) buf.fail("the " + e.name + " element has no vertex_indices list");
+    // An empty face element without properties (PCL's PLYWriter writes "element face 0") is fine.
+    if ((is_face || is_strip) && iface < 0 && e.count > 0) buf.fail("the " + e.name + " element has no vertex_indices list");
     if ((is_face || is_strip) && nv < 0) buf.fail("faces come before the vertex element");
     std::vector<double> scal(e.props.size());
     std::vector<long long> list;

@@ -141,3 +141,46 @@ TEST(CameraIo, MalformedFilesGiveClearErrors) {
   std::filesystem::remove(cm / "images.txt");
   EXPECT_NE(error_of([&] { read_colmap_text(cm.string()); }).find("no such file"), std::string::npos);
 }
+
+TEST(CameraIo, MiddleburyStereoCalibReadsThe2014Format) {
+  const auto dir = test::temp_dir("mbcalib");
+  const auto p = (dir / "calib.txt").string();
+  // The Adirondack calib.txt of Middlebury 2014 (full size).
+  write(p, "cam0=[4161.221 0 1445.577; 0 4161.221 984.686; 0 0 1]\ncam1=[4161.221 0 1654.636; 0 4161.221 984.686; 0 0 1]\n"
+           "doffs=209.059\nbaseline=176.252\nwidth=2880\nheight=1988\nndisp=280\nisint=0\nvmin=33\nvmax=218\ndyavg=0.187\ndymax=0.546\n");
+  const RectifiedPairCalibration c = read_middlebury_stereo_calib(p);
+  EXPECT_DOUBLE_EQ(c.f, 4161.221);
+  EXPECT_DOUBLE_EQ(c.cx0, 1445.577);
+  EXPECT_DOUBLE_EQ(c.cx1, 1654.636);
+  EXPECT_DOUBLE_EQ(c.cy, 984.686);
+  EXPECT_DOUBLE_EQ(c.doffs, 209.059);
+  EXPECT_DOUBLE_EQ(c.baseline, 176.252);
+  EXPECT_EQ(c.width, 2880);
+  EXPECT_EQ(c.ndisp, 280);
+}
+
+TEST(CameraIo, MalformedStereoCalibGivesClearErrors) {
+  const auto dir = test::temp_dir("mbcalib_bad");
+  const auto p = (dir / "calib.txt").string();
+  const std::string cam0 = "cam0=[100 0 50; 0 100 40; 0 0 1]\n", cam1 = "cam1=[100 0 60; 0 100 40; 0 0 1]\n";
+  auto err = [&](const std::string& text) {
+    write(p, text);
+    return error_of([&] { read_middlebury_stereo_calib(p); });
+  };
+  EXPECT_NE(err(cam0 + cam1).find("missing baseline"), std::string::npos);
+  EXPECT_NE(err(cam0 + "baseline=1\n").find("missing cam1"), std::string::npos);
+  EXPECT_NE(err(cam0 + cam1 + "baseline=-3\n").find(":3: baseline must be > 0"), std::string::npos);
+  EXPECT_NE(err("cam0=[100 0 50; 0 100 40]\n" + cam1 + "baseline=1\n").find("3 rows of 3 numbers"), std::string::npos);
+  EXPECT_NE(err("cam0=[100 0 50; 0 100 x; 0 0 1]\n").find("'x' is not a number"), std::string::npos);
+  EXPECT_NE(err("cam0=100 0 50\n").find("matrix in brackets"), std::string::npos);
+  EXPECT_NE(err(cam0 + cam0).find("appears twice"), std::string::npos);
+  EXPECT_NE(err(cam0 + cam1 + "baseline=1\ncolour=3\n").find("unknown key 'colour'"), std::string::npos);
+  EXPECT_NE(err(cam0 + cam1 + "baseline=1\ndoffs=3\n").find("cx1 - cx0"), std::string::npos);
+  EXPECT_NE(err(cam0 + "cam1=[90 0 60; 0 90 40; 0 0 1]\nbaseline=1\n").find("not rectified"), std::string::npos);
+  EXPECT_NE(err(cam0 + cam1 + "baseline=1\nwidth=2.5\n").find("non-negative integer"), std::string::npos);
+  EXPECT_NE(err("no equals sign\n").find(":1: expected 'key=value'"), std::string::npos);
+  EXPECT_NE(error_of([&] { read_middlebury_stereo_calib((dir / "none.txt").string()); }).find("none.txt"), std::string::npos);
+  // Valid without doffs: derived from the principal points.
+  write(p, cam0 + cam1 + "baseline=2\n");
+  EXPECT_DOUBLE_EQ(read_middlebury_stereo_calib(p).doffs, 10.0);
+}

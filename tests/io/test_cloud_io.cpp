@@ -1,6 +1,10 @@
 #include <gtest/gtest.h>
 
 #include <pcl/conversions.h>
+#include <pcl/point_types.h>
+
+#include <fstream>
+#include <iterator>
 
 #include "test_util.h"
 #include "tbsp/io/cloud_io.h"
@@ -30,4 +34,37 @@ TEST(CloudIo, PcdAndPlyRoundTrip) {
       EXPECT_FLOAT_EQ((*r)[42].normal_z, 1.0f);
     }
   std::filesystem::remove_all(dir);
+}
+
+TEST(CloudIo, PlyWithColourAndExtraFieldsKeepsThemAndReadsBack) {
+  // Colour and a custom scalar go through PCL's PLYWriter ("element face 0" without
+  // properties, normals as nx/ny/nz); tbsp's reader takes such files.
+  pcl::PointCloud<pcl::PointXYZRGBNormal> c;
+  for (int i = 0; i < 5; ++i) {
+    pcl::PointXYZRGBNormal p;
+    p.x = float(i);
+    p.y = 2.f * i;
+    p.z = -1.f;
+    p.normal_x = 0;
+    p.normal_y = 0;
+    p.normal_z = 1;
+    p.r = 200;
+    p.g = 10;
+    p.b = 30;
+    c.push_back(p);
+  }
+  pcl::PCLPointCloud2 blob;
+  pcl::toPCLPointCloud2(c, blob);
+  const auto dir = test::temp_dir("cloud_rgb");
+  const std::string path = (dir / "c.ply").string();
+  write_cloud(path, blob, true);
+  bool has_normals = false;
+  const auto back = read_cloud_normals(path, &has_normals);
+  ASSERT_EQ(back->size(), 5u);
+  EXPECT_TRUE(has_normals);
+  EXPECT_FLOAT_EQ((*back)[3].y, 6.f);
+  EXPECT_FLOAT_EQ((*back)[3].normal_z, 1.f);
+  std::ifstream in(path, std::ios::binary);
+  std::string header((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(header.find("property uchar red"), std::string::npos);
 }

@@ -153,3 +153,44 @@ TEST(StereoDepthFusion, BadFramesAreRejectedNamingTheCamera) {
   o.near = 2;
   EXPECT_THROW(s.setOptions(o), InvalidInput);
 }
+
+#include "tbsp/mesh/primitives.h"
+#include "tbsp/multiview/model_guided_stereo.h"
+
+TEST(ModelGuidedStereo, BadInputIsRejectedAndOutputUntouched) {
+  const Camera c0 = Camera::lookAt("left", 80, 60, 1.0, {-0.2, 0, -2}, {0, 0, 0}, {0, -1, 0});
+  const Camera c1 = Camera::lookAt("right", 80, 60, 1.0, {0.2, 0, -2}, {0, 0, 0}, {0, -1, 0});
+  const cv::Mat img = texture(80, 60, 5);
+  ModelGuidedStereo m;
+  TriMesh out;
+  out.V = Eigen::MatrixX3d::Ones(1, 3);
+  auto message = [&] {
+    try {
+      m.refine(out);
+    } catch (const InvalidInput& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  m.setInputFrame({c0, c1}, {img, img});
+  EXPECT_NE(message().find("mesh is empty"), std::string::npos);
+  TriMesh sphere = make_icosphere(2);
+  sphere.V *= 0.3;
+  m.setInputMesh(sphere);
+  m.setInputFrame({c0}, {img});
+  EXPECT_NE(message().find("at least 2"), std::string::npos);
+  m.setInputFrame({c0, c1}, {img, texture(40, 30, 1)});
+  EXPECT_NE(message().find("'right'"), std::string::npos);
+  TriMesh far = sphere;
+  far.V.col(2).array() -= 50.0;  // behind both cameras
+  m.setInputMesh(far);
+  m.setInputFrame({c0, c1}, {img, img});
+  EXPECT_NE(message().find("outside every view"), std::string::npos);
+  EXPECT_EQ(out.V.rows(), 1);
+  ModelGuidedStereoOptions o;
+  o.patch_size = 4;
+  EXPECT_THROW(m.setOptions(o), InvalidInput);
+  o = {};
+  o.search_range = 0;
+  EXPECT_THROW(m.setOptions(o), InvalidInput);
+}

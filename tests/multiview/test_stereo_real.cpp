@@ -19,6 +19,7 @@
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/multiview/model_guided_stereo.h"
 #include "tbsp/multiview/rasterizer.h"
 #include "tbsp/multiview/stereo_depth_fusion.h"
 #include "tbsp/plugins/synth_studio.h"
@@ -278,4 +279,132 @@ TEST(StereoFusion, InriaDancerProjectsInsideTheSilhouettes) {
               st.report().skipped_pairs.size(), cloud.size(), 100 * frac, st.report().seconds_total);
   EXPECT_GT(cloud.size(), 5000u);
   EXPECT_GE(frac, 0.98);
+}
+
+namespace {
+// 20 umbrella smoothing steps (λ = 0.5) take the detail away.
+Eigen::MatrixX3d smooth(const TriMesh& m, int steps) {
+  std::vector<std::vector<int>> nb(m.V.rows());
+  for (Eigen::Index f = 0; f < m.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      nb[m.F(f, k)].push_back(m.F(f, (k + 1) % 3));
+      nb[m.F(f, k)].push_back(m.F(f, (k + 2) % 3));
+    }
+  Eigen::MatrixX3d V = m.V;
+  for (int s = 0; s < steps; ++s) {
+    Eigen::MatrixX3d W = V;
+    for (Eigen::Index i = 0; i < V.rows(); ++i) {
+      if (nb[i].empty()) continue;
+      Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+      for (int j : nb[i]) c += V.row(j);
+      W.row(i) = 0.5 * V.row(i) + 0.5 * c / double(nb[i].size());
+    }
+    V = W;
+  }
+  return V;
+}
+double mean_angle_deg(const Eigen::MatrixX3d& A, const Eigen::MatrixX3d& B) {
+  double s = 0;
+  for (Eigen::Index i = 0; i < A.rows(); ++i) s += std::acos(std::clamp(A.row(i).dot(B.row(i)), -1.0, 1.0));
+  return s / A.rows() * 180.0 / M_PI;
+}
+}  // namespace
+
+TEST(ModelGuidedStereo, SmoothedOffsetMeshRecoversTheGroundTruth) {
+  const auto dir = test::temp_dir("mvs_refine");
+  synth::StudioOptions so;
+  so.frames = 1;
+  so.markers = 4;
+  so.detail = 2;  // 17k vertices: 20 smoothing steps take detail away without collapsing the body (detail 1: caps shrink by cm)
+  synth::write_synthetic_studio(dir.string(), so);
+  const Studio s = read_studio((dir / "studio.yaml").string());
+  StudioFrameStream stream(s, {});
+  StudioFrame fr;
+  ASSERT_TRUE(stream.next(fr));
+  const TriMesh gt = read_mesh(s.groundTruthPath(fr.frame));
+  const double diag = (gt.V.colwise().maxCoeff() - gt.V.colwise().minCoeff()).norm();
+  // Start: detail smoothed away, then a smooth offset of ~1 % of the diagonal along the normals.
+  TriMesh start = gt;
+  start.V = smooth(gt, 20);
+  const Eigen::MatrixX3d Ns = vertex_normals(start.V, start.F);
+  for (Eigen::Index i = 0; i < start.V.rows(); ++i) {
+    const Eigen::Vector3d p = start.V.row(i);
+    const double w = 0.75 + 0.25 * std::sin(3.0 * p.y() / diag * M_PI) * std::cos(2.0 * p.x() / diag * M_PI);
+    start.V.row(i) += 0.01 * diag * w * Ns.row(i);
+  }
+  auto mean_dist = [&](const TriMesh& m) { return point_mesh_distances(gt.V, gt.F, m.V).mean() / diag; };
+  // Vertices of the truth that >= 2 cameras see (depth test against the rendered truth): what
+  // stereo can refine at all (the ring of cameras does not see the tops of the shoulders or
+  // the underside of the skirt).
+  std::vector<char> visible(gt.V.rows(), 0);
+  {
+    const auto cams = s.cameraList();
+    const auto views = Rasterizer().renderViews(gt, cams);
+    for (Eigen::Index i = 0; i < gt.V.rows(); ++i) {
+      int nv = 0;
+      const Eigen::Vector3d X = gt.V.row(i).transpose();
+      for (std::size_t k = 0; k < cams.size(); ++k) {
+        const Eigen::Vector2d p = cams[k].project(X);
+        const int x = int(std::lround(p.x())), y = int(std::lround(p.y()));
+        if (!cams[k].inImage(p) || x < 0 || y < 0 || x >= views[k].width || y >= views[k].height) continue;
+        if (cams[k].depth(X) <= views[k].depth[std::size_t(y) * views[k].width + x] + 0.002 * diag) ++nv;
+      }
+      visible[i] = nv >= 2;
+    }
+  }
+  auto mean_dist_visible = [&](const TriMesh& m) {
+    const Eigen::VectorXd d = point_mesh_distances(gt.V, gt.F, m.V);
+    double sum = 0;
+    int n = 0;
+    for (Eigen::Index i = 0; i < d.size(); ++i)
+      if (visible[i]) {
+        sum += d[i];
+        ++n;
+      }
+    return sum / std::max(1, n) / diag;
+  };
+  const Eigen::MatrixX3d Ngt = vertex_normals(gt.V, gt.F);
+  const double d0 = mean_dist(start), a0 = mean_angle_deg(vertex_normals(start.V, start.F), Ngt);
+
+  ModelGuidedStereo mvs;
+  mvs.setInputFrame(s.cameraList(), fr.images, fr.silhouettes, fr.frame);
+  mvs.setInputMesh(start);
+  TriMesh refined;
+  mvs.refine(refined);
+  const auto& r = mvs.report();
+  ASSERT_EQ(refined.V.rows(), start.V.rows());
+  const double d1 = mean_dist(refined), a1 = mean_angle_deg(vertex_normals(refined.V, refined.F), Ngt);
+
+  // The same refinement with the fused cloud alone (no model guidance, no silhouettes).
+  StereoDepthFusion<pcl::PointXYZRGBNormal> fusion;
+  StereoFusionOptions fo;
+  fo.use_silhouettes = false;
+  fusion.setOptions(fo);
+  fusion.setInputFrame(s.cameraList(), fr.images, {}, fr.frame);
+  pcl::PointCloud<pcl::PointXYZRGBNormal> cloud;
+  fusion.compute(cloud);
+  Eigen::MatrixX3d P(cloud.size(), 3), N(cloud.size(), 3);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    P.row(i) << cloud[i].x, cloud[i].y, cloud[i].z;
+    N.row(i) << cloud[i].normal_x, cloud[i].normal_y, cloud[i].normal_z;
+  }
+  TriMesh fused_refined;
+  refine_mesh_to_cloud(start, P, N, mvs.options().constraint_weight, mvs.options().search_range, mvs.options().fit_iterations, fused_refined);
+  const double d2 = mean_dist(fused_refined), a2 = mean_angle_deg(vertex_normals(fused_refined.V, fused_refined.F), Ngt);
+  std::printf("  seen by >= 2 cameras (%ld of %ld vertices): start %.3f -> model-guided %.3f (%.0f %% less) | fused cloud alone %.3f\n",
+              long(std::count(visible.begin(), visible.end(), 1)), long(visible.size()), 100 * mean_dist_visible(start),
+              100 * mean_dist_visible(refined), 100 * (1 - mean_dist_visible(refined) / mean_dist_visible(start)),
+              100 * mean_dist_visible(fused_refined));
+  std::printf("  model-guided stereo: %ld samples -> %ld points (mean NCC %.2f), %.2f s stereo + %.2f s fit; %d vertices\n"
+              "  mean distance to GT (%% of diagonal): start %.3f -> model-guided %.3f (%.0f %% less) | fused cloud alone %.3f (%.0f %% less)\n"
+              "  mean normal deviation to GT: start %.1f deg -> model-guided %.1f deg | fused cloud alone %.1f deg\n",
+              r.samples, r.points, r.mean_score, r.seconds_stereo, r.seconds_fit, int(start.V.rows()), 100 * d0, 100 * d1,
+              100 * (1 - d1 / d0), 100 * d2, 100 * (1 - d2 / d0), a0, a1, a2);
+  // Measured: 62 % less over all vertices, 75 % over the seen ones. The normals do not get
+  // closer (8.8 -> 9.4 deg): reported, not asserted (docs/stereo.md).
+  EXPECT_LE(d1, 0.5 * d0);
+  EXPECT_LE(mean_dist_visible(refined), 0.35 * mean_dist_visible(start));
+  EXPECT_LT(r.seconds_stereo + r.seconds_fit, 10.0);  // sanity only; speed is bench_stereo's
+  (void)a2;
+  std::filesystem::remove_all(dir);
 }

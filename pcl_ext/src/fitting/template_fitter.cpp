@@ -122,7 +122,7 @@ FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eig
   fit_impl::prepare_cloud(s, P_in, N_in, roi, params, orient_normals);
   fit_impl::prepare_markers(s, P_in, roi);
   TriMesh aligned;
-  if (markers.empty()) {  // a template roughly in place: similarity alignment first
+  if (markers.empty() && params.align_without_markers) {  // a template roughly in place: similarity alignment first
     report_progress(progress, 0.03, "alignment");
     fit_impl::align_without_markers(s, aligned);
     s.useTemplate(aligned);

@@ -29,6 +29,24 @@ std::vector<Camera> read_colmap_text(const std::string& dir);
 /// Writes cameras.txt + images.txt (one OPENCV or PINHOLE camera per image, no 2D points).
 void write_colmap_text(const std::string& dir, const std::vector<Camera>& cameras);
 
+/// Calibration of a rectified stereo pair in the Middlebury 2014 `calib.txt` format:
+/// `cam0=[f 0 cx0; 0 f cy; 0 0 1]`, `cam1=[f 0 cx1; 0 f cy; 0 0 1]`, `doffs=` (cx1 - cx0),
+/// `baseline=` (world units, mm in Middlebury), optional `width=`, `height=`, `ndisp=`, `vmin=`,
+/// `vmax=`, `isint=`, `dyavg=`, `dymax=` (read and ignored where unused). Depth of a left pixel
+/// with disparity d: Z = baseline * f / (d + doffs).
+struct RectifiedPairCalibration {
+  double f = 0;             ///< focal length, pixels (both cameras)
+  double cx0 = 0, cx1 = 0;  ///< principal points' x, pixels
+  double cy = 0;            ///< common principal point y, pixels
+  double doffs = 0;         ///< cx1 - cx0
+  double baseline = 0;      ///< world units
+  int width = 0, height = 0, ndisp = 0;  ///< 0 when absent
+};
+/// Throws FileError ("FILE:LINE: ...") on a missing file, unknown or repeated keys, matrices that
+/// are not 3x3 numbers, f <= 0, two different focal lengths or cy, doffs inconsistent with the
+/// principal points (|doffs - (cx1 - cx0)| > 0.01 px), baseline <= 0, or missing cam0/cam1/baseline.
+RectifiedPairCalibration read_middlebury_stereo_calib(const std::string& path);
+
 /// A plain 3x4 projection matrix: 12 numbers, row-major, in pixels. Accepted around them:
 /// '#' comments, an XML `<camera>...</camera>` wrapper (as in the INRIA "dancer" set) and a
 /// leading `CONTOUR` keyword (as in MIT's `.Pmat.cal` files). Anything else is an error.

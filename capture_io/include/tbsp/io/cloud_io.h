@@ -20,7 +20,8 @@ pcl::PCLPointCloud2 read_cloud(const std::string& path);
 pcl::PointCloud<pcl::PointNormal>::Ptr read_cloud_normals(const std::string& path, bool* has_normals = nullptr);
 
 /// \brief Writes a cloud atomically: `.pcd` (binary, or ascii when binary=false) or `.ply`
-/// (binary little endian or ascii; x,y,z and normals if present). \throws FileError.
+/// (binary little endian or ascii; x,y,z and normals if present; a cloud with more fields —
+/// colour, confidence — goes through PCL's PLYWriter, which keeps them). \throws FileError.
 void write_cloud(const std::string& path, const pcl::PCLPointCloud2& cloud, bool binary = true);
 
 }  // namespace tbsp

@@ -182,6 +182,10 @@ struct FitParameters {
   /// geodesic scale of §5.2 then apply as with user markers. 0: one pass (the aligned fit).
   /// Range 0..1000; default 30.
   int auto_markers = 30;
+  /// Without markers: first align the template to the cloud by a similarity (trimmed ICP with
+  /// scale). false: the template is used where it is — for refining a mesh that is already
+  /// posed (ModelGuidedStereo), where a partial cloud would pull a global alignment off.
+  bool align_without_markers = true;
   bool fairing = false;                 ///< §5.5.3
   double fairing_lambda = 0.5;          ///< λ of eq. 5.2
   int fairing_steps = 2;                ///< per iteration

@@ -1,0 +1,118 @@
+// `tbsp stereo` end to end: a small synthetic studio (fused clouds, depth PNGs, render, report),
+// a Middlebury pair with ground truth, and bad input (exit 2, message, nothing clobbered).
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "cli_util.h"
+#include "test_util.h"
+#include "tbsp/io/cloud_io.h"
+
+using namespace tbsp;
+namespace fs = std::filesystem;
+
+namespace {
+test::CliResult run(const std::string& args, const fs::path& dir) { return test::run_cli(args, dir); }
+nlohmann::json load(const fs::path& p) {
+  std::ifstream in(p);
+  return nlohmann::json::parse(in);
+}
+}  // namespace
+
+TEST(CliStereo, StudioFramesToFusedCloudsDepthMapsRenderAndReport) {
+  const auto dir = test::temp_dir("cli_stereo");
+  const std::string st = (dir / "studio").string(), out = (dir / "out").string();
+  auto r = run("synth-studio -q --out " + st + " --cameras 8 --width 400 --height 400 --frames 2 --detail 0", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = run("stereo " + st + " --out " + out + " --frames 0:1 --scale 1 -q", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const char* f : {"cloud_0000.ply", "cloud_0001.ply", "cloud_0000.png", "stereo_report.json"})
+    EXPECT_TRUE(fs::exists(out + "/" + f)) << f;
+  const auto rep = load(out + "/stereo_report.json");
+  ASSERT_EQ(rep["frames"].size(), 2u);
+  const auto& f0 = rep["frames"][0];
+  EXPECT_GE(f0["pairs"].size(), 6u);
+  EXPECT_GT(f0["points"]["output"].get<long>(), 5000);
+  // The synthetic studio has ground truth: 90 % of the points within 0.5 % of the diagonal.
+  ASSERT_TRUE(f0.contains("accuracy90_percent_of_diagonal"));
+  EXPECT_LT(f0["accuracy90_percent_of_diagonal"].get<double>(), 0.5);
+  // The cloud has normals, colour and the confidence field (PLY header), and reads back.
+  std::ifstream ply(out + "/cloud_0000.ply", std::ios::binary);
+  std::string header, line;
+  while (std::getline(ply, line) && line != "end_header") header += line + "\n";
+  for (const char* prop : {"property float nx", "property uchar red", "property float confidence"})
+    EXPECT_NE(header.find(prop), std::string::npos) << prop << " missing in\n" << header;
+  const auto cloud = read_cloud(out + "/cloud_0000.ply");
+  EXPECT_EQ(static_cast<long>(cloud.width) * cloud.height, f0["points"]["output"].get<long>());
+  // 16-bit depth PNGs, one per view and pair.
+  int depth_pngs = 0;
+  for (const auto& e : fs::directory_iterator(out + "/depth")) {
+    const cv::Mat d = cv::imread(e.path().string(), cv::IMREAD_ANYDEPTH);
+    EXPECT_EQ(d.type(), CV_16U) << e.path();
+    ++depth_pngs;
+  }
+  EXPECT_EQ(depth_pngs, 2 * static_cast<int>(f0["pairs"].size() + rep["frames"][1]["pairs"].size()));
+  // Frames outside the studio: exit 2, the previous report kept.
+  const auto before = fs::last_write_time(out + "/stereo_report.json");
+  r = run("stereo " + st + " --out " + out + " --frames 5:9 -q", dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("outside the studio's frames 0..1"), std::string::npos) << r.err;
+  EXPECT_EQ(fs::last_write_time(out + "/stereo_report.json"), before);
+}
+
+TEST(CliStereo, RectifiedPairWithGroundTruthAndBadInput) {
+  const auto dir = test::temp_dir("cli_stereo_pair");
+  const std::string m = test::shared("capture/fjordyo0707__StereoMatching-CostFilter/testdata/cones/");
+  TBSP_REQUIRE_FILE(m + "disp2.png");
+  const std::string out = (dir / "pair").string();
+  auto r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --disparities 64 --gt " + m + "disp2.png --gt-scale 4 --out " + out, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto rep = load(out + "/stereo_report.json");
+  EXPECT_LT(rep["bad_pixels_1px_percent"].get<double>(), 12.5);  // measured 10.1 %
+  const cv::Mat d = cv::imread(out + "/disparity.png", cv::IMREAD_ANYDEPTH);
+  ASSERT_EQ(d.type(), CV_16U);
+  EXPECT_EQ(d.cols, 450);
+  EXPECT_TRUE(fs::exists(out + "/disparity_color.png"));
+  // With a calibration: a cloud of the checked matches.
+  const std::string calib = (dir / "calib.txt").string();
+  std::ofstream(calib) << "cam0=[1000 0 225; 0 1000 187; 0 0 1]\ncam1=[1000 0 225; 0 1000 187; 0 0 1]\nbaseline=100\nwidth=450\nheight=375\nndisp=64\n";
+  r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --calib " + calib + " --out " + out, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_GT(load(out + "/stereo_report.json")["points"].get<long>(), 100000);
+  // Bad input: exit 2 with a message naming the file.
+  r = run("stereo --left " + m + "im2.png --right " + (dir / "nope.png").string() + " --out " + out, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("nope.png"), std::string::npos) << r.err;
+  std::ofstream(calib) << "cam0=[1000 0 225; 0 1000 187; 0 0 1]\ncam1=[1000 0 225; 0 1000 187; 0 0 1]\nbaseline=100\nwidth=640\nheight=480\n";
+  r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --calib " + calib + " --out " + out, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("640x480"), std::string::npos) << r.err;
+  r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --disparities 50 --out " + out, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("multiple of 16"), std::string::npos) << r.err;
+  r = run("stereo --out " + out, dir);
+  EXPECT_EQ(r.code, 2);
+}
+
+TEST(CliStereo, RefineStereoKeepsAGoodMeshAndNamesMissingMeshes) {
+  const auto dir = test::temp_dir("cli_refine_stereo");
+  const std::string st = (dir / "studio").string(), out = (dir / "out").string();
+  auto r = run("synth-studio -q --out " + st + " --cameras 8 --width 500 --height 500 --frames 1 --detail 1", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  // The ground-truth mesh is already right: refinement moves it little (mean < 0.3 % of ~1.9 m).
+  r = run("refine-stereo " + st + " --meshes " + st + "/gt --out " + out + " -q", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(out + "/refined_0000.ply"));
+  const auto rep = load(out + "/refine_report.json");
+  ASSERT_EQ(rep["frames"].size(), 1u);
+  EXPECT_GT(rep["frames"][0]["points"].get<long>(), 1000);
+  EXPECT_LT(rep["frames"][0]["mean_vertex_move"].get<double>(), 0.006);
+  // A missing mesh is named before anything runs.
+  r = run("refine-stereo " + st + " --meshes " + (dir / "none_%04d.ply").string() + " --out " + out + " -q", dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("none_0000.ply"), std::string::npos) << r.err;
+}
