@@ -401,10 +401,22 @@ TEST(ModelGuidedStereo, SmoothedOffsetMeshRecoversTheGroundTruth) {
   TriMesh fused_refined;
   refine_mesh_to_cloud(start, P, N, mvs.options().constraint_weight, mvs.options().search_range, mvs.options().fit_iterations, fused_refined);
   const double d2 = mean_dist(fused_refined), a2 = mean_angle_deg(vertex_normals(fused_refined.V, fused_refined.F), Ngt);
-  std::printf("  seen by >= 2 cameras (%ld of %ld vertices): start %.3f -> model-guided %.3f (%.0f %% less) | fused cloud alone %.3f\n",
+  auto angle_visible = [&](const TriMesh& m) {
+    const Eigen::MatrixX3d Nm = vertex_normals(m.V, m.F);
+    double sum = 0;
+    int n = 0;
+    for (Eigen::Index i = 0; i < Nm.rows(); ++i)
+      if (visible[i]) {
+        sum += std::acos(std::clamp(Nm.row(i).dot(Ngt.row(i)), -1.0, 1.0));
+        ++n;
+      }
+    return sum / std::max(1, n) * 180.0 / M_PI;
+  };
+  std::printf("  seen by >= 2 cameras (%ld of %ld vertices): start %.3f -> model-guided %.3f (%.0f %% less) | fused cloud alone %.3f; "
+              "normal deviation %.1f -> %.1f deg | %.1f deg\n",
               long(std::count(visible.begin(), visible.end(), 1)), long(visible.size()), 100 * mean_dist_visible(start),
               100 * mean_dist_visible(refined), 100 * (1 - mean_dist_visible(refined) / mean_dist_visible(start)),
-              100 * mean_dist_visible(fused_refined));
+              100 * mean_dist_visible(fused_refined), angle_visible(start), angle_visible(refined), angle_visible(fused_refined));
   std::printf("  model-guided stereo: %ld samples -> %ld points (mean NCC %.2f), %.2f s stereo + %.2f s fit; %d vertices\n"
               "  mean distance to GT (%% of diagonal): start %.3f -> model-guided %.3f (%.0f %% less) | fused cloud alone %.3f (%.0f %% less)\n"
               "  mean normal deviation to GT: start %.1f deg -> model-guided %.1f deg | fused cloud alone %.1f deg\n",
