@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <sstream>
 
@@ -193,6 +194,32 @@ std::pair<int, int> parse_frames(const std::string& s, const Studio& st) {
   return {a, b};
 }
 
+// Streams frames first..last of a studio with a progress bar over all of them: `run(frame,
+// progress)` gets each frame and a callback mapping its own [0, 1] into the frame's share.
+// Returns the number of frames run.
+int for_each_frame(const Studio& st, int first, int last, bool silhouettes, bool quiet,
+                   const std::function<void(const StudioFrame&, const ProgressCallback&, ProgressBar&)>& run) {
+  StudioFrameStream::Options so;
+  so.first = first;
+  so.last = last;
+  so.silhouettes = silhouettes;
+  StudioFrameStream stream(st, so);
+  ProgressBar bar(!quiet);
+  const ProgressCallback cb = bar.callback();
+  StudioFrame fr;
+  const int total = last - first + 1;
+  int done = 0;
+  while (stream.next(fr)) {
+    const int base = done;
+    const ProgressCallback frame_cb = [&](double x, const std::string& stage) {
+      return !cb || cb((base + x) / total, "frame " + std::to_string(fr.frame) + ": " + stage);
+    };
+    run(fr, frame_cb, bar);
+    ++done;
+  }
+  return done;
+}
+
 int run_studio(const StereoArgs& a) {
   const Studio st = read_studio(a.studio);
   const auto [first, last] = parse_frames(a.frames, st);
@@ -203,24 +230,11 @@ int run_studio(const StereoArgs& a) {
   if (!(a.depth_unit > 0)) throw InvalidInput("--depth-unit must be > 0");
   const fs::path out(a.out);
   fs::create_directories(out / "depth");
-  StudioFrameStream::Options so;
-  so.first = first;
-  so.last = last;
-  so.silhouettes = !a.no_silhouettes;
-  StudioFrameStream stream(st, so);
   const std::vector<Camera> cams = st.cameraList();
-  ProgressBar bar(!a.quiet);
-  const ProgressCallback cb = bar.callback();
   nlohmann::json frames = nlohmann::json::array();
-  StudioFrame fr;
   const auto t0 = Clock::now();
-  const int total = last - first + 1;
-  int done = 0;
-  while (stream.next(fr)) {
-    const int base = done;
-    fusion.setProgressCallback([&](double f, const std::string& stage) {
-      return !cb || cb((base + f) / total, "frame " + std::to_string(fr.frame) + ": " + stage);
-    });
+  const int done = for_each_frame(st, first, last, !a.no_silhouettes, a.quiet, [&](const StudioFrame& fr, const ProgressCallback& progress, ProgressBar& bar) {
+    fusion.setProgressCallback(progress);
     std::vector<cv::Mat> sil = a.no_silhouettes ? std::vector<cv::Mat>{} : fr.silhouettes;
     bool any = false;
     for (const auto& m : sil) any = any || !m.empty();
@@ -277,15 +291,14 @@ int run_studio(const StereoArgs& a) {
       render_panels_png((out / ("cloud_" + id + ".png")).string(), panels, ro);
     }
     frames.push_back(fj);
-    ++done;
-    if (a.quiet) continue;
+    if (a.quiet) return;
     bar.finish();
     std::cout << "frame " << fr.frame << ": " << r.pairs << " pairs, " << r.output_points << " points ("
               << r.depth_points << " depths, " << r.consistent_points << " confirmed), " << r.seconds_total << " s"
               << (fj.contains("accuracy90_percent_of_diagonal") ? ", 90 % within " + std::to_string(fj["accuracy90_percent_of_diagonal"].get<double>()) + " % of the diagonal" : "")
               << "\n";
-    for (const auto& s : r.skipped_pairs) std::cout << "  skipped " << s << "\n";
-  }
+    for (const auto& sk : r.skipped_pairs) std::cout << "  skipped " << sk << "\n";
+  });
   nlohmann::json rep = {{"studio", a.studio}, {"frames", frames}, {"seconds", seconds_since(t0)}, {"depth_png_unit", a.depth_unit},
                         {"options", {{"image_scale", o.image_scale}, {"partners", o.partners}, {"min_agreeing_views", o.min_agreeing_views},
                                      {"depth_tolerance", o.depth_tolerance}, {"use_silhouettes", o.use_silhouettes}}}};
@@ -338,21 +351,10 @@ int cmd_refine_stereo(const RefineStereoArgs& a) {
     if (!fs::exists(expand_frame_pattern(pattern, f)))
       throw FileError("'" + expand_frame_pattern(pattern, f) + "': no posed mesh for frame " + std::to_string(f) + " (--meshes " + a.meshes + ")");
   fs::create_directories(a.out);
-  StudioFrameStream::Options so;
-  so.first = first;
-  so.last = last;
-  so.silhouettes = !a.no_silhouettes;
-  StudioFrameStream stream(st, so);
-  ProgressBar bar(!a.quiet);
-  const ProgressCallback cb = bar.callback();
   nlohmann::json frames = nlohmann::json::array();
-  StudioFrame fr;
   const auto t0 = Clock::now();
-  const int total = last - first + 1;
-  int done = 0;
-  while (stream.next(fr)) {
-    const int base = done;
-    mvs.setProgressCallback([&](double x, const std::string& stage) { return !cb || cb((base + x) / total, "frame " + std::to_string(fr.frame) + ": " + stage); });
+  for_each_frame(st, first, last, !a.no_silhouettes, a.quiet, [&](const StudioFrame& fr, const ProgressCallback& progress, ProgressBar& bar) {
+    mvs.setProgressCallback(progress);
     mvs.setInputFrame(st.cameraList(), fr.images, a.no_silhouettes ? std::vector<cv::Mat>{} : fr.silhouettes, fr.frame);
     mvs.setInputMesh(read_mesh(expand_frame_pattern(pattern, fr.frame)));
     TriMesh refined;
@@ -362,12 +364,11 @@ int cmd_refine_stereo(const RefineStereoArgs& a) {
     frames.push_back({{"frame", fr.frame}, {"samples", r.samples}, {"points", r.points}, {"points_per_view", r.points_per_view},
                       {"mean_ncc", r.mean_score}, {"mean_vertex_move", r.mean_vertex_move}, {"max_vertex_move", r.max_vertex_move},
                       {"seconds", {{"stereo", r.seconds_stereo}, {"fit", r.seconds_fit}, {"total", r.seconds_total}}}});
-    ++done;
-    if (a.quiet) continue;
+    if (a.quiet) return;
     bar.finish();
     std::cout << "frame " << fr.frame << ": " << r.points << " stereo points of " << r.samples << " searched pixels, mean move "
               << r.mean_vertex_move << ", " << r.seconds_total << " s\n";
-  }
+  });
   write_text_file_atomic((fs::path(a.out) / "refine_report.json").string(),
                          nlohmann::json({{"studio", a.studio}, {"frames", frames}, {"seconds", seconds_since(t0)}}).dump(2) + "\n");
   return 0;
