@@ -34,6 +34,6 @@ void add_capture_commands(CLI::App& app, CommandTable& table);  // synth-studio,
 void add_tet_commands(CLI::App& app, CommandTable& table);      // tetdeform
 void add_texture_commands(CLI::App& app, CommandTable& table);  // texture
 void add_mocap_commands(CLI::App& app, CommandTable& table);    // mocap
-void add_stereo_commands(CLI::App& app, CommandTable& table);   // stereo
+void add_stereo_commands(CLI::App& app, CommandTable& table);   // stereo, refine-stereo, refine-silhouette
 
 }  // namespace tbsp::cli

@@ -116,3 +116,21 @@ TEST(CliStereo, RefineStereoKeepsAGoodMeshAndNamesMissingMeshes) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("none_0000.ply"), std::string::npos) << r.err;
 }
+
+TEST(CliStereo, RefineSilhouetteKeepsAMatchingMeshAndRefusesBadOptions) {
+  const auto dir = test::temp_dir("cli_refine_sil");
+  const std::string st = (dir / "studio").string(), out = (dir / "out").string();
+  auto r = run("synth-studio -q --out " + st + " --cameras 6 --width 400 --height 400 --frames 2 --detail 0", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = run("refine-silhouette " + st + " --meshes " + st + "/gt/%04d.ply --frames 1 --out " + out + " -q", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(out + "/refined_0001.ply"));
+  const auto rep = load(out + "/silhouette_report.json");
+  ASSERT_EQ(rep["frames"].size(), 1u);
+  EXPECT_EQ(rep["frames"][0]["views"].size(), 6u);
+  // The ground truth already matches: the mismatch does not grow.
+  EXPECT_LE(rep["frames"][0]["xor_after"].get<long>(), rep["frames"][0]["xor_before"].get<long>());
+  r = run("refine-silhouette " + st + " --meshes " + st + "/gt/%04d.ply --weight 0 --out " + out + " -q", dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("weight"), std::string::npos) << r.err;
+}

@@ -1,6 +1,7 @@
-// `tbsp stereo`: multi-view stereo fusion of a studio (per frame: fused cloud, depth PNGs, a PNG
-// render, report JSON) and disparity of one rectified pair (disparity PNGs, optional cloud and
-// ground-truth evaluation). docs/stereo.md.
+// Multi-view commands: `tbsp stereo` (fusion of a studio's frames: fused cloud, depth PNGs, a
+// PNG render, report JSON; or the disparity of one rectified pair), `tbsp refine-stereo`
+// (model-guided stereo refinement of posed meshes) and `tbsp refine-silhouette` (silhouette
+// refinement). docs/stereo.md, docs/silhouette_refinement.md.
 #include "command.h"
 
 #include <cmath>
@@ -25,6 +26,7 @@
 #include "tbsp/io/studio.h"
 #include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/multiview/model_guided_stereo.h"
+#include "tbsp/multiview/silhouette_refinement.h"
 #include "tbsp/multiview/stereo_depth_fusion.h"
 #include "tbsp/plugins/preview_render.h"
 
@@ -318,6 +320,8 @@ int cmd_stereo(const StereoArgs& a) {
   return run_studio(a);
 }
 
+std::string mesh_pattern(const std::string& meshes, int first, int last);
+
 struct RefineStereoArgs {
   std::string studio, meshes, out, frames;
   ModelGuidedStereoOptions o;
@@ -345,11 +349,7 @@ int cmd_refine_stereo(const RefineStereoArgs& a) {
   o.use_silhouettes = !a.no_silhouettes;
   ModelGuidedStereo mvs;
   mvs.setOptions(o);
-  std::string pattern = a.meshes;
-  if (fs::is_directory(pattern)) pattern = (fs::path(pattern) / "%04d.ply").string();
-  for (int f = first; f <= last; ++f)  // every input is checked before anything runs
-    if (!fs::exists(expand_frame_pattern(pattern, f)))
-      throw FileError("'" + expand_frame_pattern(pattern, f) + "': no posed mesh for frame " + std::to_string(f) + " (--meshes " + a.meshes + ")");
+  const std::string pattern = mesh_pattern(a.meshes, first, last);
   fs::create_directories(a.out);
   nlohmann::json frames = nlohmann::json::array();
   const auto t0 = Clock::now();
@@ -374,11 +374,78 @@ int cmd_refine_stereo(const RefineStereoArgs& a) {
   return 0;
 }
 
+// Posed meshes per frame: a pattern with %d / %04d, or a folder holding FFFF.ply; every frame's
+// mesh is checked before anything runs.
+std::string mesh_pattern(const std::string& meshes, int first, int last) {
+  std::string pattern = meshes;
+  if (fs::is_directory(pattern)) pattern = (fs::path(pattern) / "%04d.ply").string();
+  for (int f = first; f <= last; ++f)
+    if (!fs::exists(expand_frame_pattern(pattern, f)))
+      throw FileError("'" + expand_frame_pattern(pattern, f) + "': no posed mesh for frame " + std::to_string(f) + " (--meshes " + meshes + ")");
+  return pattern;
+}
+
+struct RefineSilhouetteArgs {
+  std::string studio, meshes, out, frames;
+  SilhouetteRefinementOptions o;
+  bool quiet = false;
+};
+
+void add_refine_silhouette(CLI::App& app, RefineSilhouetteArgs& a, CLI::App*& sub) {
+  sub = app.add_subcommand("refine-silhouette", "refine posed meshes to the studio's silhouettes (thesis §6.3.1-2, docs/silhouette_refinement.md)");
+  sub->add_option("studio", a.studio, "studio.yaml (or its folder) with silhouettes")->required();
+  sub->add_option("--meshes", a.meshes, "posed mesh per frame: a pattern with %d / %04d, or a folder holding FFFF.ply")->required();
+  sub->add_option("--out", a.out, "output folder: refined_FFFF.ply + silhouette_report.json")->required();
+  sub->add_option("--frames", a.frames, "frames a:b (inclusive) or one frame; default all");
+  sub->add_flag("--lines", a.o.line_constraints, "line constraints (§6.3.2) instead of back-projected points (§6.3.1)");
+  sub->add_option("--weight", a.o.weight, "constraint weight (default 0.35; thesis 0.25-0.5)");
+  sub->add_option("--iterations", a.o.max_iterations, "at most this many iterations (default 20)");
+  sub->add_option("--max-distance", a.o.max_distance_px, "ε: farthest contour point used, pixels (default 20)");
+  sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
+}
+
+int cmd_refine_silhouette(const RefineSilhouetteArgs& a) {
+  const Studio st = read_studio(a.studio);
+  const auto [first, last] = parse_frames(a.frames, st);
+  for (const auto& c : st.cameras)
+    if (c.silhouettes.empty())
+      throw InvalidInput("camera '" + c.camera.name() + "' of " + a.studio + " has no silhouettes: silhouette refinement needs them for every camera");
+  SilhouetteRefinement sr;
+  sr.setOptions(a.o);
+  const std::string pattern = mesh_pattern(a.meshes, first, last);
+  fs::create_directories(a.out);
+  nlohmann::json frames = nlohmann::json::array();
+  const auto t0 = Clock::now();
+  for_each_frame(st, first, last, true, a.quiet, [&](const StudioFrame& fr, const ProgressCallback& progress, ProgressBar& bar) {
+    sr.setProgressCallback(progress);
+    sr.setInputFrame(st.cameraList(), fr.silhouettes, fr.frame);
+    sr.setInputMesh(read_mesh(expand_frame_pattern(pattern, fr.frame)));
+    TriMesh refined;
+    sr.refine(refined);
+    write_mesh((fs::path(a.out) / ("refined_" + expand_frame_pattern("%04d", fr.frame) + ".ply")).string(), refined);
+    const auto& r = sr.report();
+    nlohmann::json views = nlohmann::json::array();
+    for (const auto& v : r.views)
+      views.push_back({{"camera", v.camera}, {"iou_before", v.iou_before}, {"iou_after", v.iou_after}, {"xor_before", v.xor_before},
+                       {"xor_after", v.xor_after}, {"constraints", v.constraints}});
+    frames.push_back({{"frame", fr.frame}, {"iterations", r.iterations}, {"best_iteration", r.best_iteration}, {"xor_before", r.xor_before},
+                      {"xor_after", r.xor_after}, {"views", views}, {"seconds", r.seconds}});
+    if (a.quiet) return;
+    bar.finish();
+    std::cout << "frame " << fr.frame << ": silhouette mismatch " << r.xor_before << " -> " << r.xor_after << " pixels in " << r.iterations
+              << " iterations, " << r.seconds << " s\n";
+  });
+  write_text_file_atomic((fs::path(a.out) / "silhouette_report.json").string(),
+                         nlohmann::json({{"studio", a.studio}, {"frames", frames}, {"seconds", seconds_since(t0)}}).dump(2) + "\n");
+  return 0;
+}
+
 }  // namespace
 
 void add_stereo_commands(CLI::App& app, CommandTable& table) {
   register_command<StereoArgs>(app, table, add_stereo, cmd_stereo);
   register_command<RefineStereoArgs>(app, table, add_refine_stereo, cmd_refine_stereo);
+  register_command<RefineSilhouetteArgs>(app, table, add_refine_silhouette, cmd_refine_silhouette);
 }
 
 }  // namespace tbsp::cli

@@ -1,0 +1,101 @@
+// Silhouette refinement (§6.3.1 / §6.3.2) on the synthetic studio: a shrunk and shifted copy of
+// the ground-truth mesh is pulled back to the silhouettes.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+
+#include "test_util.h"
+#include "tbsp/core/error.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/io/studio.h"
+#include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/multiview/silhouette_refinement.h"
+#include "tbsp/plugins/synth_studio.h"
+
+using namespace tbsp;
+
+namespace {
+struct Scene {
+  Studio studio;
+  StudioFrame frame;
+  TriMesh gt, start;
+  double diag = 0;
+};
+Scene make_scene(const std::string& name) {
+  Scene s;
+  const auto dir = test::temp_dir(name);
+  synth::StudioOptions so;
+  so.frames = 1;
+  so.markers = 4;
+  so.width = so.height = 500;
+  synth::write_synthetic_studio(dir.string(), so);
+  s.studio = read_studio((dir / "studio.yaml").string());
+  StudioFrameStream stream(s.studio, {});
+  stream.next(s.frame);
+  s.gt = read_mesh(s.studio.groundTruthPath(s.frame.frame));
+  s.diag = (s.gt.V.colwise().maxCoeff() - s.gt.V.colwise().minCoeff()).norm();
+  // Start: 4 % thinner about the vertical axis through the centroid, shifted by 1 % of the diagonal.
+  s.start = s.gt;
+  const Eigen::RowVector3d c = s.gt.V.colwise().mean();
+  for (Eigen::Index i = 0; i < s.start.V.rows(); ++i) {
+    Eigen::RowVector3d p = s.start.V.row(i) - c;
+    p.x() *= 0.96;
+    p.z() *= 0.96;
+    s.start.V.row(i) = c + p + Eigen::RowVector3d(0.01 * s.diag, 0, 0);
+  }
+  return s;
+}
+}  // namespace
+
+TEST(SilhouetteRefinement, ShrunkShiftedMeshIsPulledBackToTheSilhouettes) {
+  Scene sc = make_scene("silhouette_refine");
+  for (bool lines : {false, true}) {
+    SilhouetteRefinement r;
+    SilhouetteRefinementOptions o;
+    o.line_constraints = lines;
+    r.setOptions(o);
+    r.setInputFrame(sc.studio.cameraList(), sc.frame.silhouettes, sc.frame.frame);
+    r.setInputMesh(sc.start);
+    TriMesh out;
+    r.refine(out);
+    const auto& rep = r.report();
+    const double d0 = point_mesh_distances(sc.gt.V, sc.gt.F, sc.start.V).mean() / sc.diag;
+    const double d1 = point_mesh_distances(sc.gt.V, sc.gt.F, out.V).mean() / sc.diag;
+    double iou0 = 1, iou1 = 1;
+    for (const auto& v : rep.views) {
+      iou0 = std::min(iou0, v.iou_before);
+      iou1 = std::min(iou1, v.iou_after);
+    }
+    std::printf("  %s constraints: %d iterations (best %d), XOR %ld -> %ld px, worst view IoU %.3f -> %.3f, mean distance to GT %.3f%% -> %.3f%% "
+                "of the diagonal, %.2f s\n",
+                lines ? "line" : "position", rep.iterations, rep.best_iteration, rep.xor_before, rep.xor_after, iou0, iou1, 100 * d0,
+                100 * d1, rep.seconds);
+    ASSERT_EQ(out.V.rows(), sc.start.V.rows());
+    EXPECT_LT(rep.xor_after, rep.xor_before / 2);
+    EXPECT_GT(iou1, iou0);
+    EXPECT_LT(d1, d0);
+    for (const auto& v : rep.views) EXPECT_LE(v.xor_after, v.xor_before) << v.camera;
+  }
+}
+
+TEST(SilhouetteRefinement, BadInputIsRejected) {
+  SilhouetteRefinement r;
+  TriMesh out;
+  EXPECT_THROW(r.refine(out), InvalidInput);
+  const Camera c = Camera::lookAt("c", 40, 30, 1.0, {0, 0, -2}, {0, 0, 0}, {0, -1, 0});
+  r.setInputFrame({c}, {cv::Mat(20, 20, CV_8U, cv::Scalar(255))});
+  TriMesh m;
+  m.V = Eigen::MatrixX3d::Random(3, 3);
+  m.F.resize(1, 3);
+  m.F << 0, 1, 2;
+  r.setInputMesh(m);
+  try {
+    r.refine(out);
+    FAIL();
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("'c'"), std::string::npos) << e.what();
+  }
+  SilhouetteRefinementOptions o;
+  o.weight = 0;
+  EXPECT_THROW(r.setOptions(o), InvalidInput);
+}
