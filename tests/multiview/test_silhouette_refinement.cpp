@@ -1,7 +1,9 @@
-// Silhouette refinement (§6.3.1 / §6.3.2) on the synthetic studio: a shrunk and shifted copy of
-// the ground-truth mesh is pulled back to the silhouettes.
+// Silhouette refinement (§6.3.1 / §6.3.2) on the synthetic studio: the ground-truth mesh offset
+// by a smooth field of 2 % of the diagonal is pulled back to the silhouettes.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 #include "test_util.h"
@@ -34,20 +36,20 @@ Scene make_scene(const std::string& name) {
   stream.next(s.frame);
   s.gt = read_mesh(s.studio.groundTruthPath(s.frame.frame));
   s.diag = (s.gt.V.colwise().maxCoeff() - s.gt.V.colwise().minCoeff()).norm();
-  // Start: 4 % thinner about the vertical axis through the centroid, shifted by 1 % of the diagonal.
+  // Start: the truth offset along its normals by a smooth field of up to 2 % of the diagonal
+  // (the performance-capture issue's case): bulges and dents of the size of limbs.
   s.start = s.gt;
-  const Eigen::RowVector3d c = s.gt.V.colwise().mean();
+  const Eigen::MatrixX3d N = vertex_normals(s.gt.V, s.gt.F);
   for (Eigen::Index i = 0; i < s.start.V.rows(); ++i) {
-    Eigen::RowVector3d p = s.start.V.row(i) - c;
-    p.x() *= 0.96;
-    p.z() *= 0.96;
-    s.start.V.row(i) = c + p + Eigen::RowVector3d(0.01 * s.diag, 0, 0);
+    const Eigen::RowVector3d p = s.gt.V.row(i) / s.diag;
+    const double w = std::sin(2 * M_PI * p.y()) * std::cos(2 * M_PI * p.x()) + 0.5 * std::cos(3 * M_PI * p.z());
+    s.start.V.row(i) += 0.02 * s.diag * std::clamp(w, -1.0, 1.0) * N.row(i);
   }
   return s;
 }
 }  // namespace
 
-TEST(SilhouetteRefinement, ShrunkShiftedMeshIsPulledBackToTheSilhouettes) {
+TEST(SilhouetteRefinement, SmoothlyOffsetMeshIsPulledBackToTheSilhouettes) {
   Scene sc = make_scene("silhouette_refine");
   for (bool lines : {false, true}) {
     SilhouetteRefinement r;
@@ -71,10 +73,12 @@ TEST(SilhouetteRefinement, ShrunkShiftedMeshIsPulledBackToTheSilhouettes) {
                 lines ? "line" : "position", rep.iterations, rep.best_iteration, rep.xor_before, rep.xor_after, iou0, iou1, 100 * d0,
                 100 * d1, rep.seconds);
     ASSERT_EQ(out.V.rows(), sc.start.V.rows());
-    EXPECT_LT(rep.xor_after, rep.xor_before / 2);
     EXPECT_GT(iou1, iou0);
     EXPECT_LT(d1, d0);
-    for (const auto& v : rep.views) EXPECT_LE(v.xor_after, v.xor_before) << v.camera;
+    double worst = 1;
+    for (const auto& v : rep.views) worst = std::min(worst, 1.0 - double(v.xor_after) / double(v.xor_before));
+    std::printf("    XOR reduction per view: worst %.0f %%\n", 100 * worst);
+    EXPECT_GE(worst, 0.70);  // the target, every view
   }
 }
 
