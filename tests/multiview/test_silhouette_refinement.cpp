@@ -99,6 +99,29 @@ TEST(SilhouetteRefinement, BadInputIsRejected) {
   } catch (const InvalidInput& e) {
     EXPECT_NE(std::string(e.what()).find("'c'"), std::string::npos) << e.what();
   }
+  // An empty silhouette, and a mesh behind the camera: named errors, output untouched.
+  TriMesh tri;
+  tri.V.resize(3, 3);
+  tri.V << -0.1, -0.1, 0, 0.1, -0.1, 0, 0, 0.1, 0;
+  tri.F = m.F;
+  r.setInputMesh(tri);
+  r.setInputFrame({c}, {cv::Mat(30, 40, CV_8U, cv::Scalar(0))});
+  out.V = Eigen::MatrixX3d::Ones(1, 3);
+  auto message = [&] {
+    try {
+      r.refine(out);
+    } catch (const InvalidInput& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(message().find("silhouette is empty"), std::string::npos);
+  TriMesh behind = tri;
+  behind.V.col(2).array() -= 10.0;
+  r.setInputMesh(behind);
+  r.setInputFrame({c}, {cv::Mat(30, 40, CV_8U, cv::Scalar(255))});
+  EXPECT_NE(message().find("outside every view"), std::string::npos);
+  EXPECT_EQ(out.V.rows(), 1);
   SilhouetteRefinementOptions o;
   o.weight = 0;
   EXPECT_THROW(r.setOptions(o), InvalidInput);

@@ -86,6 +86,9 @@ void SilhouetteRefinement::refine(TriMesh& refined) {
     if (s.empty() || s.type() != CV_8U || s.cols != cameras_[k].width() || s.rows != cameras_[k].height())
       throw InvalidInput(where + "camera '" + cameras_[k].name() + "': the silhouette must be 8-bit and " + std::to_string(cameras_[k].width()) +
                          "x" + std::to_string(cameras_[k].height()) + " (the calibrated size)");
+    if (cv::countNonZero(s >= 128) == 0)
+      throw InvalidInput(where + "camera '" + cameras_[k].name() +
+                         "': the silhouette is empty (no foreground pixel): it would pull the whole mesh away; fix the segmentation or leave the camera out");
   }
   std::vector<cv::Mat> igx(n), igy(n);
   for (int k = 0; k < n; ++k) mask_gradient(silhouettes_[k] >= 128, igx[k], igy[k]);

@@ -20,7 +20,8 @@
 /// views) stops improving; the best iterate is returned.
 ///
 /// Units: pixels for image distances, world units for the mesh. Errors: InvalidInput naming the
-/// camera/frame and the fix (no silhouettes, size mismatch, empty mesh, mesh outside every view);
+/// camera/frame and the fix (no silhouettes, size mismatch, an empty silhouette, empty mesh, mesh
+/// outside every view);
 /// Cancelled. The output is untouched on error.
 
 #include <memory>
