@@ -79,6 +79,17 @@ void write_png(const std::string& path, const cv::Mat& m) {
   });
 }
 
+// A float map as a 16-bit PNG image: value = round(v * factor) clamped to 65535; NaN and v <= 0 -> 0.
+cv::Mat to_u16(const cv::Mat& f, double factor) {
+  cv::Mat u(f.size(), CV_16U);
+  for (int y = 0; y < f.rows; ++y)
+    for (int x = 0; x < f.cols; ++x) {
+      const float v = f.at<float>(y, x);
+      u.at<std::uint16_t>(y, x) = std::isnan(v) || v <= 0 ? 0 : static_cast<std::uint16_t>(std::min(65535L, std::lround(v * factor)));
+    }
+  return u;
+}
+
 // A cloud with a "confidence" float field after the XYZRGBNormal fields.
 void write_cloud_with_confidence(const std::string& path, const pcl::PointCloud<pcl::PointXYZRGBNormal>& c, const std::vector<float>& conf) {
   pcl::PCLPointCloud2 a, b, out;
@@ -128,13 +139,7 @@ int run_pair(const StereoArgs& a) {
   const DisparityMap d = compute_disparity(L, R, mo);
   fs::create_directories(a.out);
   const fs::path out(a.out);
-  cv::Mat d16(d.disparity.size(), CV_16U);  // KITTI convention: value = disparity * 256, 0 = none
-  for (int y = 0; y < d16.rows; ++y)
-    for (int x = 0; x < d16.cols; ++x) {
-      const float v = d.disparity.at<float>(y, x);
-      d16.at<std::uint16_t>(y, x) = std::isnan(v) || v <= 0 ? 0 : static_cast<std::uint16_t>(std::min(65535L, std::lround(v * 256.0)));
-    }
-  write_png((out / "disparity.png").string(), d16);
+  write_png((out / "disparity.png").string(), to_u16(d.disparity, 256.0));  // KITTI convention: disparity * 256, 0 = none
   write_png((out / "disparity_color.png").string(), colour_disparity(d.disparity, mo.min_disparity, mo.min_disparity + mo.num_disparities));
   nlohmann::json rep = {{"left", a.left}, {"right", a.right}, {"width", L.cols}, {"height", L.rows},
                         {"min_disparity", mo.min_disparity}, {"num_disparities", mo.num_disparities},
@@ -247,15 +252,9 @@ int run_studio(const StereoArgs& a) {
     const auto& r = fusion.report();
     const std::string id = expand_frame_pattern("%04d", fr.frame);
     write_cloud_with_confidence((out / ("cloud_" + id + "." + a.format)).string(), cloud, fusion.getConfidence());
-    for (const ViewDepth& v : fusion.getDepthMaps()) {
-      cv::Mat d16(v.depth.size(), CV_16U);
-      for (int y = 0; y < d16.rows; ++y)
-        for (int x = 0; x < d16.cols; ++x) {
-          const float z = v.depth.at<float>(y, x);
-          d16.at<std::uint16_t>(y, x) = std::isnan(z) ? 0 : static_cast<std::uint16_t>(std::clamp(std::lround(z / a.depth_unit), 0L, 65535L));
-        }
-      write_png((out / "depth" / (cams[v.camera].name() + "_" + cams[v.partner].name() + "_" + id + ".png")).string(), d16);
-    }
+    for (const ViewDepth& v : fusion.getDepthMaps())
+      write_png((out / "depth" / (cams[v.camera].name() + "_" + cams[v.partner].name() + "_" + id + ".png")).string(),
+                to_u16(v.depth, 1.0 / a.depth_unit));
     nlohmann::json fj = {{"frame", fr.frame}, {"pairs", r.pair_names}, {"skipped_pairs", r.skipped_pairs},
                          {"points", {{"depth", r.depth_points}, {"consistent", r.consistent_points}, {"fused", r.fused_points}, {"output", r.output_points}}},
                          {"seconds", {{"rectify", r.seconds_rectify}, {"match", r.seconds_match}, {"fusion", r.seconds_fusion},

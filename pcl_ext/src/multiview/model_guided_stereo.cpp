@@ -72,25 +72,38 @@ inline bool bilinear(const cv::Mat& g, const Eigen::Vector2d& p, float& out) {
   return true;
 }
 
-float ncc(const std::vector<float>& a, const std::vector<float>& b) {
-  const std::size_t n = a.size();
-  double ma = 0, mb = 0;
-  for (std::size_t k = 0; k < n; ++k) {
-    ma += a[k];
-    mb += b[k];
+// A reference patch centred once per depth sample; ncc() against each other view's patch.
+struct CenteredPatch {
+  std::vector<double> d;  // a[k] - mean
+  double ss = 0;          // sum of d²
+  void set(const std::vector<float>& a) {
+    const std::size_t n = a.size();
+    double m = 0;
+    for (std::size_t k = 0; k < n; ++k) m += a[k];
+    m /= n;
+    d.resize(n);
+    ss = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      d[k] = a[k] - m;
+      ss += d[k] * d[k];
+    }
   }
-  ma /= n;
+};
+
+float ncc(const CenteredPatch& a, const std::vector<float>& b) {
+  const std::size_t n = b.size();
+  double mb = 0;
+  for (std::size_t k = 0; k < n; ++k) mb += b[k];
   mb /= n;
-  double sab = 0, saa = 0, sbb = 0;
+  double sab = 0, sbb = 0;
   for (std::size_t k = 0; k < n; ++k) {
-    const double da = a[k] - ma, db = b[k] - mb;
-    sab += da * db;
-    saa += da * da;
+    const double db = b[k] - mb;
+    sab += a.d[k] * db;
     sbb += db * db;
   }
   // Textureless patches (grey-level deviation below ~1 level) carry no depth information.
-  if (saa < n * 1.0 || sbb < n * 1.0) return -1.f;
-  return static_cast<float>(sab / std::sqrt(saa * sbb));
+  if (a.ss < n * 1.0 || sbb < n * 1.0) return -1.f;
+  return static_cast<float>(sab / std::sqrt(a.ss * sbb));
 }
 
 struct ViewData {
@@ -102,7 +115,9 @@ struct ViewData {
 
 }  // namespace
 
-void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d& normals) {
+void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d& normals) { computeCloud(points, normals, progress_); }
+
+void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d& normals, const ProgressCallback& progress) {
   const auto t0 = Clock::now();
   const ModelGuidedStereoOptions& o = options_;
   const std::string where = "[tbsp::ModelGuidedStereo] frame " + std::to_string(frame_) + ": ";
@@ -117,7 +132,7 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
       throw InvalidInput(where + "camera '" + cameras_[k].name() + "': the image must be 8-bit and " + std::to_string(cameras_[k].width()) +
                          "x" + std::to_string(cameras_[k].height()) + " (the calibrated size)");
   }
-  report_progress(progress_, 0.0, "render");
+  report_progress(progress, 0.0, "render");
   // Face normals.
   Eigen::MatrixX3d FN(mesh_.F.rows(), 3);
   for (Eigen::Index f = 0; f < mesh_.F.rows(); ++f) {
@@ -167,6 +182,7 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
       const Camera& cam = R.cam;
       const double f = cam.K()(0, 0);
       std::vector<float> ref(static_cast<std::size_t>(l) * l), oth(ref.size());
+      CenteredPatch ref_c;
       std::vector<float> score(S);
       std::vector<int> others;
       std::vector<Eigen::Vector3d> patch(ref.size());
@@ -212,6 +228,7 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
               score[s] = -1.f;
               continue;
             }
+            ref_c.set(ref);
             float sum = 0;
             int cnt = 0;
             for (int j : others) {
@@ -219,7 +236,7 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
               bool okj = true;
               for (std::size_t k = 0; k < patch.size() && okj; ++k) okj = bilinear(V.grey, V.cam.project(patch[k]), oth[k]);
               if (!okj) continue;
-              sum += ncc(ref, oth);
+              sum += ncc(ref_c, oth);
               ++cnt;
             }
             score[s] = cnt >= o.min_views ? sum / static_cast<float>(cnt) : -1.f;
@@ -242,7 +259,7 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
 #pragma omp critical(tbsp_mvs_progress)
       {
         ++done;
-        if (!err) report_progress(progress_, 0.8 * done / n, "photo-consistency");
+        if (!err) report_progress(progress, 0.8 * done / n, "photo-consistency");
       }
     } catch (...) {
 #pragma omp critical(tbsp_mvs_progress)
@@ -340,15 +357,7 @@ FitReport refine_mesh_to_cloud(const TriMesh& mesh, const Eigen::MatrixX3d& poin
 void ModelGuidedStereo::refine(TriMesh& refined) {
   const auto t0 = Clock::now();
   Eigen::MatrixX3d P, N;
-  const ProgressCallback outer = progress_;
-  progress_ = [&](double f, const std::string& s) { return !outer || outer(0.8 * f, s); };
-  try {
-    computeCloud(P, N);
-  } catch (...) {
-    progress_ = outer;
-    throw;
-  }
-  progress_ = outer;
+  computeCloud(P, N, [&](double f, const std::string& s) { return !progress_ || progress_(0.8 * f, s); });
   if (P.rows() == 0)
     throw InvalidInput("[tbsp::ModelGuidedStereo] frame " + std::to_string(frame_) +
                        ": no pixel found a distinct, confirmed photo-consistency maximum (textureless images, or the mesh is not where the subject is)");

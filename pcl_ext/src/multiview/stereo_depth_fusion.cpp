@@ -103,18 +103,30 @@ MapPoints back_project(const Camera& cam, const ViewDepth& v) {
   return m;
 }
 
-// Where a world point falls in a depth map: grid pixel and its depth in that camera.
-inline bool lookup(const Camera& cam, const MapPoints& m, const Eigen::Vector3f& X, int& idx, float& z_point, float& z_map) {
+// A world point seen from one camera: pixel and depth (ok = in front and inside the image).
+struct Projection {
+  bool ok = false;
+  Eigen::Vector2d p;
+  float z = 0;
+};
+inline Projection project_point(const Camera& cam, const Eigen::Vector3f& X) {
+  Projection r;
   const Eigen::Vector3d Xd = X.cast<double>();
   const double z = cam.depth(Xd);
-  if (!(z > 0)) return false;
-  const Eigen::Vector2d p = cam.project(Xd);
-  if (!cam.inImage(p)) return false;
+  if (!(z > 0)) return r;
+  r.p = cam.project(Xd);
+  r.z = static_cast<float>(z);
+  r.ok = cam.inImage(r.p);
+  return r;
+}
+
+// Where a projected point falls in one of the camera's depth maps: grid pixel and map depth.
+inline bool lookup(const Camera& cam, const MapPoints& m, const Projection& pr, int& idx, float& z_map) {
+  if (!pr.ok) return false;
   const double sx = static_cast<double>(m.w) / cam.width(), sy = static_cast<double>(m.h) / cam.height();
-  const int x = static_cast<int>(std::floor((p.x() + 0.5) * sx)), y = static_cast<int>(std::floor((p.y() + 0.5) * sy));
+  const int x = static_cast<int>(std::floor((pr.p.x() + 0.5) * sx)), y = static_cast<int>(std::floor((pr.p.y() + 0.5) * sy));
   if (x < 0 || y < 0 || x >= m.w || y >= m.h) return false;
   idx = y * m.w + x;
-  z_point = static_cast<float>(z);
   z_map = m.view->depth.at<float>(y, x);
   return true;
 }
@@ -248,18 +260,25 @@ void StereoFusionEngine::compute(const std::vector<Camera>& cameras, const std::
 #pragma omp parallel for schedule(dynamic, 1)
   for (int m = 0; m < M; ++m) {
     const int cam = maps[m].camera;
-    std::vector<char> seen(n);
+    std::vector<char> seen(n), projected(n);
+    std::vector<Projection> proj(n);
     for (std::size_t q = 0; q < mp[m].X.size(); ++q) {
       const Eigen::Vector3f& X = mp[m].X[q];
       if (std::isnan(X.x())) continue;
       std::fill(seen.begin(), seen.end(), 0);
+      std::fill(projected.begin(), projected.end(), 0);
       int count = 0;
       for (int o = 0; o < M; ++o) {
         const int k = maps[o].camera;
         if (k == cam || seen[k] || same_pair(m, o)) continue;
+        if (!projected[k]) {  // once per camera, whatever the number of its maps
+          proj[k] = project_point(cameras[k], X);
+          projected[k] = 1;
+        }
         int idx;
-        float zp, zm;
-        if (!lookup(cameras[k], mp[o], X, idx, zp, zm) || std::isnan(zm)) continue;
+        float zm;
+        if (!lookup(cameras[k], mp[o], proj[k], idx, zm) || std::isnan(zm)) continue;
+        const float zp = proj[k].z;
         if (std::abs(zm - zp) <= tol * zp) {
           seen[k] = 1;
           ++count;
@@ -287,11 +306,15 @@ void StereoFusionEngine::compute(const std::vector<Camera>& cameras, const std::
       int cnt = 1;
       used[m][q] = 1;
       std::vector<char> agreeing(n, 0), seeing(n, 0);
+      std::vector<Projection> proj(n);
+      for (int k = 0; k < n; ++k)
+        if (k != cam) proj[k] = project_point(cameras[k], X);
       for (int o = 0; o < M; ++o) {
         const int k = maps[o].camera;
         int idx;
-        float zp, zm;
-        if (k == cam || !lookup(cameras[k], mp[o], X, idx, zp, zm)) continue;
+        float zm;
+        if (k == cam || !lookup(cameras[k], mp[o], proj[k], idx, zm)) continue;
+        const float zp = proj[k].z;
         seeing[k] = 1;
         if (std::isnan(zm) || std::abs(zm - zp) > tol * zp) continue;
         if (!same_pair(m, o)) agreeing[k] = 1;
@@ -299,8 +322,7 @@ void StereoFusionEngine::compute(const std::vector<Camera>& cameras, const std::
         used[o][idx] = 1;
         sumX += mp[o].X[idx];
         sumN += mp[o].N[idx];
-        const Eigen::Vector2d pk = cameras[k].project(X.cast<double>());
-        sumC += sample_bgr(images[k], pk);
+        sumC += sample_bgr(images[k], proj[k].p);
         ++cnt;
       }
       int na = 0, ns = 0;

@@ -5,6 +5,7 @@
 #include <limits>
 
 #include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -18,9 +19,8 @@ namespace {
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 cv::Mat to_cv(const Eigen::Matrix3d& m) {
-  cv::Mat r(3, 3, CV_64F);
-  for (int a = 0; a < 3; ++a)
-    for (int b = 0; b < 3; ++b) r.at<double>(a, b) = m(a, b);
+  cv::Mat r;
+  cv::eigen2cv(m, r);
   return r;
 }
 cv::Mat dist_cv(const Distortion& d) { return (cv::Mat_<double>(1, 5) << d.k1, d.k2, d.p1, d.p2, d.k3); }

@@ -95,6 +95,7 @@ public:
   const ModelGuidedStereoReport& report() const { return report_; }
 
 private:
+  void computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d& normals, const ProgressCallback& progress);
   ModelGuidedStereoOptions options_;
   ProgressCallback progress_;
   std::vector<Camera> cameras_;
