@@ -426,7 +426,6 @@ TEST(ModelGuidedStereo, SmoothedOffsetMeshRecoversTheGroundTruth) {
   // closer (8.8 -> 9.4 deg): reported, not asserted (docs/stereo.md).
   EXPECT_LE(d1, 0.5 * d0);
   EXPECT_LE(mean_dist_visible(refined), 0.35 * mean_dist_visible(start));
-  EXPECT_LT(r.seconds_stereo + r.seconds_fit, 10.0);  // sanity only; speed is bench_stereo's
   (void)a2;
   std::filesystem::remove_all(dir);
 }
