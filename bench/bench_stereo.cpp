@@ -5,8 +5,10 @@
 // 2. One 8-view 1004x1004 studio frame (synthetic, written to DIR or a temp folder): fusion time
 //    (median of N), points, points per second, peak RSS, and raw SGBM over the same pairs'
 //    sizes and ranges (one pass each, no left-right check, no fusion) in the same run.
-// 3. Model-guided refinement of the studio's performer at detail 2 (17k vertices), smoothed by
-//    20 umbrella steps: stereo search + fit time (median of N).
+// 3. Model-guided refinement of the studio's performer at detail 2 (17k vertices) with 1 cm
+//    folds, smoothed by 20 umbrella steps: stereo search + fit time (median of N).
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -109,7 +111,10 @@ int main(int argc, char** argv) {
   }
 
   // Studio frame.
-  fs::path dir = studio_dir.empty() ? fs::temp_directory_path() / "tbsp_bench_stereo_studio" : fs::path(studio_dir);
+  // Rendered afresh each run (a cached studio would outlive a change of the renderer) unless
+  // --studio names one.
+  const fs::path tmp_root = fs::temp_directory_path() / ("tbsp_bench_stereo_" + std::to_string(::getpid()));
+  fs::path dir = studio_dir.empty() ? tmp_root / "studio" : fs::path(studio_dir);
   if (!fs::exists(dir / "studio.yaml")) {
     synth::StudioOptions so;
     so.frames = 1;
@@ -147,12 +152,13 @@ int main(int argc, char** argv) {
               cloud.size() / median(t), traw, median(t) / traw, peak_rss_mb());
 
   // Model-guided refinement.
-  fs::path dir2 = fs::temp_directory_path() / "tbsp_bench_stereo_studio_d2";
-  if (!fs::exists(dir2 / "studio.yaml")) {
+  const fs::path dir2 = tmp_root / "studio_detail2_folds";
+  {
     synth::StudioOptions so;
     so.frames = 1;
     so.markers = 4;
     so.detail = 2;
+    so.folds = 0.01;  // as in ModelGuidedStereo.SmoothedOffsetMeshRecoversTheGroundTruth
     synth::write_synthetic_studio(dir2.string(), so);
   }
   const Studio st2 = read_studio((dir2 / "studio.yaml").string());
@@ -189,5 +195,7 @@ int main(int argc, char** argv) {
   std::printf("\n## Model-guided refinement (median of %d)\n\n| vertices | searched pixels | points | stereo (s) | fit (s) | total (s) | peak RSS (MB) |\n|---|---|---|---|---|---|---|\n", repeats);
   std::printf("| %ld | %ld | %ld | %.2f | %.2f | %.2f | %.0f |\n", long(mesh.V.rows()), mvs.report().samples, pts, median(ts), median(tfit),
               median(ts) + median(tfit), peak_rss_mb());
+  std::error_code ec;
+  fs::remove_all(tmp_root, ec);
   return 0;
 }

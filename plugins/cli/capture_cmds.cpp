@@ -52,6 +52,7 @@ void add_synth_studio(CLI::App& app, SynthStudioArgs& a, CLI::App*& sub) {
   sub->add_option("--scan-noise", a.o.scan_noise, "range-scan noise along the rays, metres (default 0.002)");
   sub->add_option("--scan-stride", a.o.scan_stride, "range-scan pixel stride (default 2)");
   sub->add_option("--detail", a.o.detail, "performer mesh resolution 0..3 (default 1)");
+  sub->add_option("--folds", a.o.folds, "amplitude of cloth folds on skirt, torso and sleeves, metres (default 0 = none; use with --detail 2)");
   sub->add_option("--seed", a.o.seed, "random seed");
   sub->add_flag("-q,--quiet", a.quiet, "no progress bar or summary");
 }

@@ -337,6 +337,8 @@ void add_refine_stereo(CLI::App& app, RefineStereoArgs& a, CLI::App*& sub) {
   sub->add_option("--weight", a.o.constraint_weight, "weight of the stereo constraints (default 0.3)");
   sub->add_option("--scale", a.o.image_scale, "matching resolution relative to the images (default 0.5)");
   sub->add_option("--stride", a.o.pixel_stride, "search every n-th pixel (default 2)");
+  sub->add_option("--detail-rounds", a.o.detail_rounds, "detail rounds after the fit, 0..10 (default 1; they bring back folds)");
+  sub->add_option("--normal-tilt", a.o.normal_tilt_deg, "patch orientations tried around the mesh normal, degrees (default 20; 0 = mesh normal only)");
   sub->add_flag("--no-silhouettes", a.no_silhouettes, "ignore the studio's silhouettes");
   sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
 }

@@ -79,10 +79,35 @@ cv::Vec3b solid_texture(const Eigen::Vector3d& rest) {
   return {static_cast<std::uint8_t>(40 + 200 * c[0]), static_cast<std::uint8_t>(40 + 200 * c[1]), static_cast<std::uint8_t>(40 + 200 * c[2])};
 }
 
+// Cloth-like folds along the vertex normals (see make_humanoid in the header).
+void add_folds(Humanoid& h, double a) {
+  const Eigen::MatrixX3d N = vertex_normals(h.mesh.V, h.mesh.F);
+  for (Eigen::Index i = 0; i < h.mesh.V.rows(); ++i) {
+    const Eigen::Vector3d p = h.mesh.V.row(i);
+    const int part = h.part[static_cast<std::size_t>(i)];
+    double d = 0;
+    if (part == 6) {  // pleats: 12 around, deeper towards the hem
+      const double s = std::clamp((0.98 - p.y()) / 0.48, 0.0, 1.0);
+      d = a * (0.3 + 0.7 * s) * std::cos(12.0 * std::atan2(p.z(), p.x()));
+    } else if (part == 0) {  // horizontal wrinkles, stronger at the front
+      d = 0.6 * a * std::sin(2 * M_PI * (p.y() - 0.85) / 0.08) * (0.75 + 0.25 * std::cos(std::atan2(p.x(), p.z())));
+    } else if (part == 2 || part == 3) {  // sleeve wrinkles
+      d = 0.4 * a * std::sin(2 * M_PI * p.y() / 0.06);
+    }
+    h.mesh.V.row(i) += d * N.row(i);
+  }
+}
+
+// The studio's lights (unit directions towards them): a key light from above the front, a fill
+// light from the back.
+const Eigen::Vector3d kKeyLight = Eigen::Vector3d(0.3, 0.8, 0.6).normalized();
+const Eigen::Vector3d kFillLight = Eigen::Vector3d(-0.4, 0.3, -0.8).normalized();
+
 }  // namespace
 
-Humanoid make_humanoid(int detail) {
+Humanoid make_humanoid(int detail, double folds) {
   if (detail < 0 || detail > 3) throw InvalidInput("[tbsp::synth::make_humanoid] detail must be 0..3");
+  if (!(folds >= 0.0) || folds > 0.05) throw InvalidInput("[tbsp::synth::make_humanoid] folds must be 0..0.05 metres");
   const int k = 1 << detail;  // resolution multiplier
   Humanoid h;
   h.mesh.V.resize(0, 3);
@@ -100,6 +125,7 @@ Humanoid make_humanoid(int detail) {
   append(h, limb({0.09, 0.88, 0}, {0.1, 0.02, 0}, 14 * k, 10 * k, leg_r), 5);
   auto skirt_r = [](double s) { return 0.16 + 0.2 * s * s; };
   append(h, limb({0, 0.98, 0}, {0, 0.5, 0}, 10 * k, 24 * k, skirt_r), 6);
+  if (folds > 0) add_folds(h, folds);
   return h;
 }
 
@@ -140,7 +166,7 @@ StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions&
   fs::create_directories(dir, ec);
   if (ec || !fs::is_directory(dir)) throw FileError("'" + dir + "': cannot create the output folder (" + ec.message() + ")");
 
-  const Humanoid hum = make_humanoid(o.detail);
+  const Humanoid hum = make_humanoid(o.detail, o.folds);
   StudioResult res;
   res.vertices = static_cast<int>(hum.mesh.V.rows());
   res.faces = static_cast<int>(hum.mesh.F.rows());
@@ -196,7 +222,7 @@ StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions&
     const TriMesh m = animate_humanoid(hum, f / o.frame_rate);
     for (std::size_t k = 0; k < marker_vertices.size(); ++k) mk.data.block<1, 3>(f, 3 * static_cast<Eigen::Index>(k)) = m.V.row(marker_vertices[k]);
     write_mesh(s.groundTruthPath(f), m);
-    const Eigen::MatrixX3d FN = face_normals(m.V, m.F);
+    const Eigen::MatrixX3d VN = vertex_normals(m.V, m.F);
     std::vector<std::string> errors(s.cameras.size());
 #pragma omp parallel for schedule(dynamic, 1)
     for (int c = 0; c < static_cast<int>(s.cameras.size()); ++c) {
@@ -220,7 +246,12 @@ StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions&
                                            b2 * hum.mesh.V.row(m.F(fi, 2)).transpose();
               const Eigen::Vector3d X = b0 * m.V.row(m.F(fi, 0)).transpose() + b1 * m.V.row(m.F(fi, 1)).transpose() +
                                         b2 * m.V.row(m.F(fi, 2)).transpose();
-              const double shade = 0.35 + 0.65 * std::abs(FN.row(fi).dot((C - X).normalized()));
+              // Lambertian under the studio's fixed lights (view-independent radiance, as
+              // multi-view stereo assumes), smooth-shaded with interpolated vertex normals.
+              Eigen::Vector3d nrm = (b0 * VN.row(m.F(fi, 0)) + b1 * VN.row(m.F(fi, 1)) + b2 * VN.row(m.F(fi, 2))).transpose();
+              nrm.normalize();
+              if (nrm.dot(C - X) < 0) nrm = -nrm;  // inside of an open part
+              const double shade = 0.4 + 0.45 * std::max(0.0, nrm.dot(kKeyLight)) + 0.25 * std::max(0.0, nrm.dot(kFillLight));
               const cv::Vec3b t = solid_texture(rest);
               for (int ch = 0; ch < 3; ++ch) col[ch] = static_cast<std::uint8_t>(std::clamp(t[ch] * shade, 0.0, 255.0));
             }

@@ -292,7 +292,7 @@ TEST(StereoFusion, InriaDancerProjectsInsideTheSilhouettes) {
 }
 
 namespace {
-// 20 umbrella smoothing steps (λ = 0.5) take the detail away.
+// 20 umbrella smoothing steps (λ = 0.5) take the detail (the performer's folds) away.
 Eigen::MatrixX3d smooth(const TriMesh& m, int steps) {
   std::vector<std::vector<int>> nb(m.V.rows());
   for (Eigen::Index f = 0; f < m.F.rows(); ++f)
@@ -326,6 +326,7 @@ TEST(ModelGuidedStereo, SmoothedOffsetMeshRecoversTheGroundTruth) {
   so.frames = 1;
   so.markers = 4;
   so.detail = 2;  // 17k vertices: 20 smoothing steps take detail away without collapsing the body (detail 1: caps shrink by cm)
+  so.folds = 0.01;  // 1 cm pleats and wrinkles: the detail the smoothing takes away and stereo must bring back
   synth::write_synthetic_studio(dir.string(), so);
   const Studio s = read_studio((dir / "studio.yaml").string());
   StudioFrameStream stream(s, {});
@@ -373,8 +374,26 @@ TEST(ModelGuidedStereo, SmoothedOffsetMeshRecoversTheGroundTruth) {
       }
     return sum / std::max(1, n) / diag;
   };
+  // Normal deviation where the surface is: a vertex's normal against the truth's face normal at
+  // the closest point (per-index normals would also count the tangential slide of the
+  // smoothing, which no refinement undoes), over the vertices >= 2 cameras see.
+  const MeshDistance gt_tree(gt.V, gt.F);
+  const Eigen::MatrixX3d FNgt = face_normals(gt.V, gt.F);
+  auto normal_dev = [&](const TriMesh& m) {
+    const Eigen::MatrixX3d Nm = vertex_normals(m.V, m.F);
+    double sum = 0;
+    int n = 0;
+    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
+      if (!visible[i]) continue;
+      int f = -1;
+      gt_tree.closest(m.V.row(i).transpose(), &f);
+      sum += std::acos(std::clamp(Nm.row(i).dot(FNgt.row(f)), -1.0, 1.0));
+      ++n;
+    }
+    return sum / std::max(1, n) * 180.0 / M_PI;
+  };
   const Eigen::MatrixX3d Ngt = vertex_normals(gt.V, gt.F);
-  const double d0 = mean_dist(start), a0 = mean_angle_deg(vertex_normals(start.V, start.F), Ngt);
+  const double d0 = mean_dist(start), a0 = normal_dev(start), i0 = mean_angle_deg(vertex_normals(start.V, start.F), Ngt);
 
   ModelGuidedStereo mvs;
   mvs.setInputFrame(s.cameraList(), fr.images, fr.silhouettes, fr.frame);
@@ -383,7 +402,7 @@ TEST(ModelGuidedStereo, SmoothedOffsetMeshRecoversTheGroundTruth) {
   mvs.refine(refined);
   const auto& r = mvs.report();
   ASSERT_EQ(refined.V.rows(), start.V.rows());
-  const double d1 = mean_dist(refined), a1 = mean_angle_deg(vertex_normals(refined.V, refined.F), Ngt);
+  const double d1 = mean_dist(refined), a1 = normal_dev(refined), i1 = mean_angle_deg(vertex_normals(refined.V, refined.F), Ngt);
 
   // The same refinement with the fused cloud alone (no model guidance, no silhouettes).
   StereoDepthFusion<pcl::PointXYZRGBNormal> fusion;
@@ -399,33 +418,21 @@ TEST(ModelGuidedStereo, SmoothedOffsetMeshRecoversTheGroundTruth) {
     N.row(i) << cloud[i].normal_x, cloud[i].normal_y, cloud[i].normal_z;
   }
   TriMesh fused_refined;
-  refine_mesh_to_cloud(start, P, N, mvs.options().constraint_weight, mvs.options().search_range, mvs.options().fit_iterations, fused_refined);
-  const double d2 = mean_dist(fused_refined), a2 = mean_angle_deg(vertex_normals(fused_refined.V, fused_refined.F), Ngt);
-  auto angle_visible = [&](const TriMesh& m) {
-    const Eigen::MatrixX3d Nm = vertex_normals(m.V, m.F);
-    double sum = 0;
-    int n = 0;
-    for (Eigen::Index i = 0; i < Nm.rows(); ++i)
-      if (visible[i]) {
-        sum += std::acos(std::clamp(Nm.row(i).dot(Ngt.row(i)), -1.0, 1.0));
-        ++n;
-      }
-    return sum / std::max(1, n) * 180.0 / M_PI;
-  };
-  std::printf("  seen by >= 2 cameras (%ld of %ld vertices): start %.3f -> model-guided %.3f (%.0f %% less) | fused cloud alone %.3f; "
-              "normal deviation %.1f -> %.1f deg | %.1f deg\n",
+  refine_mesh_to_cloud(start, P, N, mvs.options(), fused_refined);
+  const double d2 = mean_dist(fused_refined), a2 = normal_dev(fused_refined);
+  std::printf("  seen by >= 2 cameras (%ld of %ld vertices): start %.3f -> model-guided %.3f (%.0f %% less) | fused cloud alone %.3f\n",
               long(std::count(visible.begin(), visible.end(), 1)), long(visible.size()), 100 * mean_dist_visible(start),
               100 * mean_dist_visible(refined), 100 * (1 - mean_dist_visible(refined) / mean_dist_visible(start)),
-              100 * mean_dist_visible(fused_refined), angle_visible(start), angle_visible(refined), angle_visible(fused_refined));
+              100 * mean_dist_visible(fused_refined));
   std::printf("  model-guided stereo: %ld samples -> %ld points (mean NCC %.2f), %.2f s stereo + %.2f s fit; %d vertices\n"
               "  mean distance to GT (%% of diagonal): start %.3f -> model-guided %.3f (%.0f %% less) | fused cloud alone %.3f (%.0f %% less)\n"
-              "  mean normal deviation to GT: start %.1f deg -> model-guided %.1f deg | fused cloud alone %.1f deg\n",
+              "  normal deviation to the truth's surface, seen vertices: start %.1f deg -> model-guided %.1f deg (%.0f %% less) | fused cloud alone %.1f deg\n"
+              "  per-index vertex normal deviation, all vertices: start %.1f deg -> model-guided %.1f deg\n",
               r.samples, r.points, r.mean_score, r.seconds_stereo, r.seconds_fit, int(start.V.rows()), 100 * d0, 100 * d1,
-              100 * (1 - d1 / d0), 100 * d2, 100 * (1 - d2 / d0), a0, a1, a2);
-  // Measured: 62 % less over all vertices, 75 % over the seen ones. The normals do not get
-  // closer (8.8 -> 9.4 deg): reported, not asserted (docs/stereo.md).
+              100 * (1 - d1 / d0), 100 * d2, 100 * (1 - d2 / d0), a0, a1, 100 * (1 - a1 / a0), a2, i0, i1);
+  // Measured (docs/stereo.md): distance -65 % (all) / -77 % (seen); normal deviation 15.6 -> 11.3 deg.
   EXPECT_LE(d1, 0.5 * d0);
   EXPECT_LE(mean_dist_visible(refined), 0.35 * mean_dist_visible(start));
-  (void)a2;
+  EXPECT_LE(a1, 0.85 * a0) << "the folds do not come back";
   std::filesystem::remove_all(dir);
 }

@@ -27,8 +27,10 @@ bool ModelGuidedStereoOptions::isValid(std::string* why) const {
   if (!(distinct_margin >= 0)) return fail("distinct_margin must be >= 0");
   if (min_views < 1) return fail("min_views must be >= 1");
   if (!(max_view_angle_deg > 0) || !(max_view_angle_deg < 90)) return fail("max_view_angle_deg must be in (0, 90)");
+  if (!(normal_tilt_deg >= 0) || !(normal_tilt_deg < 60)) return fail("normal_tilt_deg must be in [0, 60)");
   if (!(constraint_weight > 0) || constraint_weight > 10) return fail("constraint_weight must be in (0, 10]");
   if (fit_iterations < 1 || fit_iterations > 100) return fail("fit_iterations must be in 1..100");
+  if (detail_rounds < 0 || detail_rounds > 10) return fail("detail_rounds must be in 0..10");
   if (min_agreeing_views < 0) return fail("min_agreeing_views must be >= 0");
   return true;
 }
@@ -213,21 +215,16 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
           }
           if (static_cast<int>(others.size()) < o.min_views) continue;
           ++samples[i];
-          // Tangent basis; one reference pixel per patch step at the initial depth.
-          const Eigen::Vector3d u = (std::abs(nn.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).cross(nn).normalized();
-          const Eigen::Vector3d v = nn.cross(u);
-          const double h = d0 / f;
-          for (int s = 0; s < S; ++s) {
-            const double t = -o.search_range + s * step;
+          const double h = d0 / f;  // one reference pixel per patch step at the initial depth
+          // Mean NCC over the other views of the l×l patch at depth d0 + t, tangent to `normal`.
+          auto score_at = [&](double t, const Eigen::Vector3d& normal) -> float {
+            const Eigen::Vector3d u = (std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).cross(normal).normalized();
+            const Eigen::Vector3d v = normal.cross(u);
             const Eigen::Vector3d X = cam.backProject(Eigen::Vector2d(x, y), d0 + t);
             for (int b = -half, k = 0; b <= half; ++b)
               for (int a = -half; a <= half; ++a, ++k) patch[k] = X + (a * u + b * v) * h;
-            bool ok = true;
-            for (std::size_t k = 0; k < patch.size() && ok; ++k) ok = bilinear(R.grey, cam.project(patch[k]), ref[k]);
-            if (!ok) {
-              score[s] = -1.f;
-              continue;
-            }
+            for (std::size_t k = 0; k < patch.size(); ++k)
+              if (!bilinear(R.grey, cam.project(patch[k]), ref[k])) return -1.f;
             ref_c.set(ref);
             float sum = 0;
             int cnt = 0;
@@ -239,20 +236,45 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
               sum += ncc(ref_c, oth);
               ++cnt;
             }
-            score[s] = cnt >= o.min_views ? sum / static_cast<float>(cnt) : -1.f;
-          }
-          const int best = static_cast<int>(std::max_element(score.begin(), score.end()) - score.begin());
+            return cnt >= o.min_views ? sum / static_cast<float>(cnt) : -1.f;
+          };
+          for (int s = 0; s < S; ++s) score[s] = score_at(-o.search_range + s * step, nn);
+          int best = static_cast<int>(std::max_element(score.begin(), score.end()) - score.begin());
           if (best == 0 || best == S - 1 || score[best] < o.min_ncc) continue;  // no interior maximum
           float rest = -1.f;
           for (int s = 0; s < S; ++s)
             if (std::abs(s - best) > 2) rest = std::max(rest, score[s]);
           if (score[best] - rest < o.distinct_margin) continue;  // not distinct
+          // Patch orientation: the mesh normal tilted by normal_tilt_deg in 8 directions when
+          // that correlates better at the maximum (a fold the mesh does not have yet); then the
+          // depth again around the maximum with the chosen normal.
+          Eigen::Vector3d nbest = nn;
+          if (o.normal_tilt_deg > 0) {
+            const Eigen::Vector3d u = (std::abs(nn.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).cross(nn).normalized();
+            const Eigen::Vector3d v = nn.cross(u);
+            const double tb = -o.search_range + best * step, ta = std::tan(o.normal_tilt_deg * M_PI / 180.0);
+            float sbest = score[best];
+            for (int dir = 0; dir < 8; ++dir) {
+              const double phi = dir * M_PI / 4;
+              const Eigen::Vector3d cand = (nn + ta * (std::cos(phi) * u + std::sin(phi) * v)).normalized();
+              if (cand.dot((cam.center() - cam.backProject(Eigen::Vector2d(x, y), d0 + tb)).normalized()) < cos_max) continue;
+              const float sc = score_at(tb, cand);
+              if (sc > sbest) {
+                sbest = sc;
+                nbest = cand;
+              }
+            }
+            if (nbest != nn)
+              for (int s = std::max(0, best - 2); s <= std::min(S - 1, best + 2); ++s) score[s] = score_at(-o.search_range + s * step, nbest);
+            best = static_cast<int>(std::max_element(score.begin() + std::max(0, best - 2), score.begin() + std::min(S, best + 3)) - score.begin());
+            if (best == 0 || best == S - 1 || score[best] < o.min_ncc) continue;
+          }
           const double sa = score[best - 1], sb = score[best], sc = score[best + 1];
           const double den = sa - 2 * sb + sc;
           const double off = den < 0 ? std::clamp(0.5 * (sa - sc) / den, -0.5, 0.5) : 0.0;
           const double t = -o.search_range + (best + off) * step;
           pts[i].push_back(cam.backProject(Eigen::Vector2d(x, y), d0 + t));
-          nrm[i].push_back(nn);
+          nrm[i].push_back(nbest);
           scores[i].push_back(static_cast<float>(sb));
           grid[i].at<float>(y / o.pixel_stride, x / o.pixel_stride) = static_cast<float>(d0 + t);
         }
@@ -335,18 +357,21 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
   normals.swap(N);
 }
 
-FitReport refine_mesh_to_cloud(const TriMesh& mesh, const Eigen::MatrixX3d& points, const Eigen::MatrixX3d& normals, double weight,
-                               double max_distance, int iterations, TriMesh& refined, const ProgressCallback& progress) {
+FitReport refine_mesh_to_cloud(const TriMesh& mesh, const Eigen::MatrixX3d& points, const Eigen::MatrixX3d& normals,
+                               const ModelGuidedStereoOptions& o, TriMesh& refined, const ProgressCallback& progress) {
   if (points.rows() == 0) throw InvalidInput("[tbsp::refine_mesh_to_cloud] the cloud is empty: no constraint to refine with");
+  std::string why;
+  if (!o.isValid(&why)) throw InvalidInput("[tbsp::refine_mesh_to_cloud] " + why);
   FitParameters p;
-  p.match_weight = weight;
-  p.max_match_distance = max_distance;
-  p.initial_match_distance = max_distance;
+  p.match_weight = o.constraint_weight;
+  p.max_match_distance = o.search_range;
+  p.initial_match_distance = o.search_range;
+  p.detail_rounds = o.detail_rounds;
   p.estimate_scale = false;
   p.rotation_field = false;
   p.auto_markers = 0;
   p.align_without_markers = false;  // the mesh is posed already
-  p.max_iterations = iterations;
+  p.max_iterations = o.fit_iterations;
   TriMesh out;
   std::vector<VertexStatus> status;
   const FitReport r = fit_template(mesh, points, normals, {}, {}, p, out, status, progress, false);
@@ -364,7 +389,7 @@ void ModelGuidedStereo::refine(TriMesh& refined) {
   ModelGuidedStereoReport rep = report_;
   const auto tf = Clock::now();
   TriMesh out;
-  rep.fit = refine_mesh_to_cloud(mesh_, P, N, options_.constraint_weight, options_.search_range, options_.fit_iterations, out,
+  rep.fit = refine_mesh_to_cloud(mesh_, P, N, options_, out,
                                  [&](double f, const std::string& s) { return !progress_ || progress_(0.8 + 0.2 * f, "fit: " + s); });
   rep.seconds_fit = seconds_since(tf);
   const Eigen::VectorXd mv = (out.V - mesh_.V).rowwise().norm();

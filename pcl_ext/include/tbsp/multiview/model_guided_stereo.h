@@ -17,12 +17,14 @@
 ///    score = mean normalised cross-correlation (grey levels, bilinear) over those views;
 /// 3. the best t is kept when its score is >= `min_ncc`, at least `min_views` other views took
 ///    part, and it beats the best score outside ±2 steps by `distinct_margin` (a distinct
-///    maximum); parabolic sub-step refinement;
+///    maximum); then the patch normal is also tried tilted by `normal_tilt_deg` in 8 directions
+///    at that depth, the best-correlating orientation kept (the point's normal) and the depth
+///    searched again ±2 steps with it; parabolic sub-step refinement;
 /// 4. a depth is kept when `min_agreeing_views` other views' searches found the same surface.
 /// Then fit_template(mesh, cloud, no markers, no alignment) with match_weight =
 /// `constraint_weight`, max_match_distance = search_range and no scale estimation refines the
-/// mesh (one search, one fit: alternating them for 3 rounds measured worse, 52 % instead of
-/// 62 % less error on the synthetic studio, docs/stereo.md).
+/// mesh, and `detail_rounds` detail rounds bring back the folds the low-weight fit smooths over
+/// (one search, one fit: alternating them measured worse, docs/stereo.md).
 ///
 /// Units: world units of the cameras (search_range default 0.02 = 2 cm for metres). Errors:
 /// InvalidInput naming the frame/camera and the fix (image size ≠ calibration, fewer than 2
@@ -51,6 +53,10 @@ struct ModelGuidedStereoOptions {
   double distinct_margin = 0.05;   ///< the maximum must beat the rest of the range by this, >= 0
   int min_views = 2;               ///< other views that must see the patch, >= 1
   double max_view_angle_deg = 70;  ///< patch normal vs direction to a camera, (0, 90)
+  /// Patch orientation search: at the depth maximum the mesh normal is also tried tilted by this
+  /// angle in 8 directions, and the best-correlating orientation is kept (it becomes the point's
+  /// normal); degrees, [0, 60), 0 = the mesh normal only.
+  double normal_tilt_deg = 20;
   bool use_silhouettes = true;     ///< search only pixels inside the view's silhouette (when given)
   /// Cross-view consistency: other views whose own search found the same depth (within two
   /// depth steps) near the point's projection, >= 0 (0 = off). Default 1.
@@ -58,6 +64,10 @@ struct ModelGuidedStereoOptions {
   /// Weight of the stereo constraints in the fit (§6.3.3: lower than data of a scan), (0, 10].
   double constraint_weight = 0.3;
   int fit_iterations = 10;         ///< iterations of the §5.3 fit, 1..100
+  /// Detail rounds after the fit (FitParameters::detail_rounds: residual matching with the
+  /// Laplacian re-based on the fitted surface), 0..10. They bring back folds the low-weight fit
+  /// smooths over (docs/stereo.md); 0 = the fit alone.
+  int detail_rounds = 1;
 
   bool isValid(std::string* why = nullptr) const;
 };
@@ -86,7 +96,7 @@ public:
   void setInputFrame(std::vector<Camera> cameras, std::vector<cv::Mat> images, std::vector<cv::Mat> silhouettes = {}, int frame = 0);
   void setInputMesh(const TriMesh& posed) { mesh_ = posed; }
 
-  /// Stereo points (the photo-consistency maxima) and their normals (the mesh's), without
+  /// Stereo points (the photo-consistency maxima) and their normals (the best patch orientation), without
   /// refining: the first half of refine().
   void computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d& normals);
   /// Stereo points, then the fit. `refined` has the input mesh's connectivity; untouched on error.
@@ -106,9 +116,11 @@ private:
 };
 
 /// Refines a posed mesh towards a point cloud with the §5.3 fit as low-weight constraints (no
-/// markers, no scale, connectivity kept): the step ModelGuidedStereo::refine ends with, usable
-/// with any cloud (e.g. StereoDepthFusion's). Returns the fit's report.
-FitReport refine_mesh_to_cloud(const TriMesh& mesh, const Eigen::MatrixX3d& points, const Eigen::MatrixX3d& normals, double weight,
-                               double max_distance, int iterations, TriMesh& refined, const ProgressCallback& progress = {});
+/// markers, no scale, connectivity kept), then `detail_rounds` detail rounds: the step
+/// ModelGuidedStereo::refine ends with, usable with any cloud (e.g. StereoDepthFusion's). Uses
+/// the options' constraint_weight, search_range (as the match distance), fit_iterations and
+/// detail_rounds. Returns the fit's report. Throws InvalidInput on an empty cloud.
+FitReport refine_mesh_to_cloud(const TriMesh& mesh, const Eigen::MatrixX3d& points, const Eigen::MatrixX3d& normals,
+                               const ModelGuidedStereoOptions& options, TriMesh& refined, const ProgressCallback& progress = {});
 
 }  // namespace tbsp

@@ -8,8 +8,8 @@
 /// - a left-right consistency check against a second SGBM run with the images swapped;
 /// - optionally (dense mode) background filling of the pixels that failed the check
 ///   (occlusions take the farther of the two neighbouring disparities on their row) and a
-///   weighted median filter guided by the left image (OpenCV ximgproc) that removes streaks.
-/// Library: tbsp_multiview (links OpenCV calib3d + ximgproc; libtbsp itself stays OpenCV-free).
+///   weighted median filter guided by the left image (written here: OpenCV ximgproc's is not deterministic) that removes streaks.
+/// Library: tbsp_multiview (links OpenCV calib3d + features2d; libtbsp itself stays OpenCV-free).
 ///
 /// Measured on Middlebury 2001/2003 (docs/stereo.md, `bench_stereo`): bad pixels (> 1 px) on
 /// all pixels with ground truth, tsukuba / venus / teddy / cones, far below raw StereoSGBM and
