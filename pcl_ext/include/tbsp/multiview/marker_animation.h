@@ -1,0 +1,139 @@
+#pragma once
+/// \file marker_animation.h
+/// \brief Marker-driven animation of a template (thesis §6.2, §9.1): motion-capture marker
+/// trajectories move handles of a tetrahedral version of the template (TetDeformer, ch. 7), and
+/// the full-resolution surface follows by DeformationTransfer (§7.3).
+///
+/// Setup (start()):
+/// 1. the marker map names, for each marker used, the template vertex it sits on;
+/// 2. the template is aligned to the first frame by a similarity fit (Umeyama: rotation,
+///    uniform scale, translation) of the mapped vertices with `align` set to their markers
+///    (markers on parts whose pose differs from the template's — a raised arm — are left out
+///    of the alignment by the map); the output lives in the markers' frame and units;
+/// 3. the aligned template is tetrahedralized to about `tets` tetrahedra (QEM decimation +
+///    TetGen, tetrahedralize_to_size) unless a tet mesh is given — a surface TetGen rejects
+///    (open, self-intersecting) gets one tetrahedron per triangle instead (surface_to_tets,
+///    reported) —, and the transfer
+///    coefficients of the surface against it are precomputed.
+///
+/// Per frame (next()): every marker present becomes a point handle (§7.2.3) at its mapped
+/// vertex's rest position with the marker as target; `iterations` TetDeformer iterations,
+/// warm-started from the previous frame's rotations; transfer to the surface. A marker missing
+/// in a frame (a gap: NaN) is dropped for that frame, not zeroed: the deformer for that set of
+/// present markers is built (one sparse Cholesky; up to 8 sets are kept) and iterated
+/// `start_iterations` times from the rest state the first time the set occurs. Residual =
+/// distance of each used marker to its vertex on the output surface.
+///
+/// Units: those of the markers (C3D is usually mm). Errors (InvalidInput): a map entry naming a
+/// marker the trajectories do not have or a vertex the template does not have, fewer than 3
+/// alignment markers present in the first frame, an invalid template or options.
+
+#include <Eigen/Core>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tbsp/core/progress.h"
+#include "tbsp/mesh/tet_mesh.h"
+#include "tbsp/mesh/tri_mesh.h"
+
+namespace tbsp {
+
+/// One marker of the map: the template vertex it sits on.
+struct MarkerMapEntry {
+  std::string marker;  ///< name in the trajectories (C3D/TRC label)
+  int vertex = -1;     ///< template surface vertex, 0..#V-1
+  bool align = true;   ///< used by the first-frame similarity alignment
+};
+
+struct MarkerAnimationOptions {
+  /// Target tetrahedron count of the control mesh when no tet mesh is given, >= 100 or 0 (=
+  /// tetrahedralize the template at full resolution). Default 5000.
+  Eigen::Index tets = 5000;
+  int iterations = 3;         ///< TetDeformer iterations per frame (warm-started), 1..100
+  int start_iterations = 40;  ///< iterations the first time a set of present markers occurs, 1..1000
+  double transfer_radius = 0; ///< DeformationTransfer radius (marker units); 0 = 5 % of the tet mesh's diagonal
+  bool align = true;          ///< similarity-align the template to the first frame (else: already in place)
+
+  bool isValid(std::string* why = nullptr) const;
+};
+
+/// What one frame did.
+struct MarkerFrameReport {
+  int frame = 0;                        ///< index into the trajectories (0-based)
+  int markers_used = 0;
+  std::vector<std::string> missing;     ///< mapped markers with a gap in this frame
+  double median_residual = 0, max_residual = 0;  ///< marker to its vertex on the output surface
+  bool rebuilt = false;                 ///< a deformer was built for this set of present markers
+  double seconds_deform = 0, seconds_transfer = 0;
+};
+
+struct MarkerAnimationReport {
+  Eigen::Matrix4d alignment = Eigen::Matrix4d::Identity();  ///< template -> marker frame (similarity)
+  double scale = 1.0;                   ///< its uniform scale
+  double alignment_rms = 0;             ///< rms distance of the alignment markers after it
+  int alignment_frame = 0;              ///< frame whose markers were used
+  Eigen::Index tet_vertices = 0, tets = 0, surface_vertices = 0;
+  /// The template could not be tetrahedralized (open, non-manifold or self-intersecting): the
+  /// control mesh is one tetrahedron per triangle (surface_to_tets, §10.8); the reason.
+  bool shell_tets = false;
+  std::string tetrahedralize_error;
+  int deformers_built = 0;
+  double seconds_setup = 0;
+  std::vector<MarkerFrameReport> frames;
+};
+
+class MarkerAnimation {
+public:
+  using Ptr = std::shared_ptr<MarkerAnimation>;
+  using ConstPtr = std::shared_ptr<const MarkerAnimation>;
+  using Options = MarkerAnimationOptions;
+
+  MarkerAnimation();
+  ~MarkerAnimation();
+  MarkerAnimation(const MarkerAnimation&) = delete;
+  MarkerAnimation& operator=(const MarkerAnimation&) = delete;
+
+  /// \throws InvalidInput when !o.isValid().
+  void setOptions(const MarkerAnimationOptions& o);
+  const MarkerAnimationOptions& options() const { return options_; }
+  void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
+
+  /// The template surface (rest pose, any units); tetrahedralized by start().
+  void setTemplate(const TriMesh& surface);
+  /// The template surface and its control tet mesh (same rest pose and units).
+  void setTemplate(const TriMesh& surface, const TetMesh& tets);
+  void setMarkerMap(std::vector<MarkerMapEntry> map) { map_ = std::move(map); started_ = false; }
+  /// Trajectories: names (one per marker) and data (#frames x 3·#markers, NaN = gap).
+  void setMarkers(std::vector<std::string> names, Eigen::MatrixXd data);
+
+  /// Validates, aligns, tetrahedralizes, precomputes the transfer. Called by the first next().
+  void start();
+  int numFrames() const { return static_cast<int>(data_.rows()); }
+  /// Deforms the next frame into `surface` (the template's connectivity); false after the last.
+  bool next(TriMesh& surface);
+  /// The aligned template (valid after start()).
+  const TriMesh& alignedTemplate() const { return surface_; }
+  const MarkerAnimationReport& report() const { return report_; }
+
+private:
+  struct Deformer;
+  Deformer& deformerFor(const std::vector<int>& present, bool& built);
+
+  MarkerAnimationOptions options_;
+  ProgressCallback progress_;
+  TriMesh surface_;
+  TetMesh tets_;
+  bool tets_given_ = false, started_ = false;
+  std::vector<MarkerMapEntry> map_;
+  std::vector<std::string> names_;
+  Eigen::MatrixXd data_;
+  std::vector<int> column_;  ///< per map entry: marker index in the trajectories
+  int next_frame_ = 0;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  MarkerAnimationReport report_;
+};
+
+}  // namespace tbsp

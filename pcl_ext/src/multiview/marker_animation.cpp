@@ -1,0 +1,227 @@
+#include "tbsp/multiview/marker_animation.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Geometry>
+
+#include "tbsp/core/error.h"
+#include "tbsp/core/timer.h"
+#include "tbsp/deform/deformation_transfer.h"
+#include "tbsp/deform/tet_deformer.h"
+#include "tbsp/mesh/tet_mesh.h"
+#include "tbsp/mesh/tetrahedralize.h"
+
+namespace tbsp {
+
+bool MarkerAnimationOptions::isValid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (tets != 0 && tets < 100) return fail("tets must be 0 (full resolution) or >= 100");
+  if (iterations < 1 || iterations > 100) return fail("iterations must be in 1..100");
+  if (start_iterations < 1 || start_iterations > 1000) return fail("start_iterations must be in 1..1000");
+  if (!(transfer_radius >= 0) || !std::isfinite(transfer_radius)) return fail("transfer_radius must be >= 0 and finite");
+  return true;
+}
+
+struct MarkerAnimation::Deformer {
+  TetDeformer d;
+  std::vector<int> entries;  ///< map entries with a handle, in handle order
+  int last_used = -1;        ///< frame it last ran
+};
+
+struct MarkerAnimation::Impl {
+  DeformationTransfer transfer;
+  std::map<std::vector<int>, std::unique_ptr<Deformer>> deformers;
+  int last_frame = -1;
+  const Deformer* last = nullptr;
+};
+
+MarkerAnimation::MarkerAnimation() : impl_(new Impl) {}
+MarkerAnimation::~MarkerAnimation() = default;
+
+void MarkerAnimation::setOptions(const MarkerAnimationOptions& o) {
+  std::string why;
+  if (!o.isValid(&why)) throw InvalidInput("[tbsp::MarkerAnimation::setOptions] " + why);
+  options_ = o;
+  started_ = false;
+}
+
+void MarkerAnimation::setTemplate(const TriMesh& surface) {
+  surface_ = surface;
+  tets_ = TetMesh{};
+  tets_given_ = false;
+  started_ = false;
+}
+
+void MarkerAnimation::setTemplate(const TriMesh& surface, const TetMesh& tets) {
+  surface_ = surface;
+  tets_ = tets;
+  tets_given_ = true;
+  started_ = false;
+}
+
+void MarkerAnimation::setMarkers(std::vector<std::string> names, Eigen::MatrixXd data) {
+  names_ = std::move(names);
+  data_ = std::move(data);
+  started_ = false;
+}
+
+void MarkerAnimation::start() {
+  const std::string who = "[tbsp::MarkerAnimation] ";
+  const auto t0 = Clock::now();
+  if (surface_.V.rows() < 4 || surface_.F.rows() < 4) throw InvalidInput(who + "the template is empty: set a closed surface mesh");
+  if (!surface_.V.allFinite()) throw InvalidInput(who + "the template has non-finite vertices");
+  if (names_.empty() || data_.rows() == 0) throw InvalidInput(who + "no marker trajectories: set markers with at least one frame");
+  if (data_.cols() != 3 * static_cast<Eigen::Index>(names_.size()))
+    throw InvalidInput(who + "the trajectories have " + std::to_string(data_.cols()) + " columns for " + std::to_string(names_.size()) +
+                       " markers (3 per marker expected)");
+  if (map_.empty()) throw InvalidInput(who + "the marker map is empty: name at least 3 markers and their template vertices");
+  // Map entries -> trajectory columns; unknown names and vertices are errors naming them.
+  column_.assign(map_.size(), -1);
+  for (std::size_t k = 0; k < map_.size(); ++k) {
+    const auto it = std::find(names_.begin(), names_.end(), map_[k].marker);
+    if (it == names_.end())
+      throw InvalidInput(who + "the marker map names '" + map_[k].marker + "', which the trajectories do not have (they have " +
+                         std::to_string(names_.size()) + " markers, e.g. '" + names_.front() + "'): fix the name or remove the entry");
+    column_[k] = static_cast<int>(it - names_.begin());
+    if (map_[k].vertex < 0 || map_[k].vertex >= surface_.V.rows())
+      throw InvalidInput(who + "marker '" + map_[k].marker + "' maps to vertex " + std::to_string(map_[k].vertex) + ", but the template has " +
+                         std::to_string(surface_.V.rows()) + " vertices");
+    for (std::size_t j = 0; j < k; ++j)
+      if (map_[j].marker == map_[k].marker) throw InvalidInput(who + "marker '" + map_[k].marker + "' is mapped twice");
+  }
+  auto present = [&](int f, std::size_t k) { return data_.block<1, 3>(f, 3 * column_[k]).allFinite(); };
+
+  // Similarity alignment on the first frame with >= 3 alignment markers present.
+  report_ = MarkerAnimationReport{};
+  if (options_.align) {
+    int f0 = -1;
+    for (int f = 0; f < data_.rows() && f0 < 0; ++f) {
+      int n = 0;
+      for (std::size_t k = 0; k < map_.size(); ++k) n += map_[k].align && present(f, k);
+      if (n >= 3) f0 = f;
+    }
+    if (f0 < 0) throw InvalidInput(who + "no frame has 3 or more of the map's alignment markers: mark more entries \"align\": true");
+    std::vector<std::size_t> use;
+    for (std::size_t k = 0; k < map_.size(); ++k)
+      if (map_[k].align && present(f0, k)) use.push_back(k);
+    Eigen::Matrix3Xd src(3, use.size()), dst(3, use.size());
+    for (std::size_t i = 0; i < use.size(); ++i) {
+      src.col(Eigen::Index(i)) = surface_.V.row(map_[use[i]].vertex).transpose();
+      dst.col(Eigen::Index(i)) = data_.block<1, 3>(f0, 3 * column_[use[i]]).transpose();
+    }
+    const Eigen::Matrix4d S = Eigen::umeyama(src, dst, true);
+    if (!S.allFinite()) throw InvalidInput(who + "the alignment markers are degenerate (collinear or coincident): mark more, spread-out entries");
+    report_.alignment = S;
+    report_.scale = S.block<3, 1>(0, 0).norm();
+    report_.alignment_frame = f0;
+    double ss = 0;
+    for (std::size_t i = 0; i < use.size(); ++i)
+      ss += (S.block<3, 3>(0, 0) * src.col(Eigen::Index(i)) + S.block<3, 1>(0, 3) - dst.col(Eigen::Index(i))).squaredNorm();
+    report_.alignment_rms = std::sqrt(ss / double(use.size()));
+    const Eigen::Matrix3d A = S.block<3, 3>(0, 0);
+    const Eigen::RowVector3d t = S.block<3, 1>(0, 3).transpose();
+    surface_.V = (surface_.V * A.transpose()).rowwise() + t;
+    if (tets_given_) tets_.V = (tets_.V * A.transpose()).rowwise() + t;
+  }
+  report_progress(progress_, 0.0, "tetrahedralize");
+  if (!tets_given_) {
+    try {
+      tets_ = options_.tets > 0 ? tetrahedralize_to_size(surface_, options_.tets) : tetrahedralize(surface_);
+    } catch (const Error& e) {
+      // Open, non-manifold or self-intersecting (parts modelled as overlapping shells): one
+      // tetrahedron per triangle (§10.8) instead of a volume.
+      tets_ = surface_to_tets(surface_);
+      report_.shell_tets = true;
+      report_.tetrahedralize_error = e.what();
+    }
+  }
+  report_progress(progress_, 0.0, "transfer");
+  DeformationTransferOptions to;
+  to.radius = options_.transfer_radius;
+  impl_->transfer.setOptions(to);
+  impl_->transfer.precompute(tets_, surface_.V);
+  impl_->deformers.clear();
+  impl_->last = nullptr;
+  report_.tet_vertices = tets_.V.rows();
+  report_.tets = tets_.T.rows();
+  report_.surface_vertices = surface_.V.rows();
+  report_.seconds_setup = seconds_since(t0);
+  next_frame_ = 0;
+  started_ = true;
+}
+
+MarkerAnimation::Deformer& MarkerAnimation::deformerFor(const std::vector<int>& entries, bool& built) {
+  auto& slot = impl_->deformers[entries];
+  built = !slot;
+  if (slot) return *slot;
+  if (impl_->deformers.size() > 8) {  // keep the 8 most recently used sets
+    auto oldest = impl_->deformers.end();
+    for (auto it = impl_->deformers.begin(); it != impl_->deformers.end(); ++it)
+      if (it->second && (oldest == impl_->deformers.end() || it->second->last_used < oldest->second->last_used)) oldest = it;
+    if (oldest != impl_->deformers.end()) {
+      if (impl_->last == oldest->second.get()) impl_->last = nullptr;
+      impl_->deformers.erase(oldest);
+    }
+  }
+  auto& s = impl_->deformers[entries];
+  s.reset(new Deformer);
+  s->d.setMesh(tets_);
+  s->entries = entries;
+  for (int k : entries) {
+    const Eigen::Vector3d p = surface_.V.row(map_[std::size_t(k)].vertex).transpose();
+    s->d.addPointHandle(p, p);
+  }
+  ++report_.deformers_built;
+  return *s;
+}
+
+bool MarkerAnimation::next(TriMesh& out) {
+  if (!started_) start();
+  if (next_frame_ >= data_.rows()) return false;
+  const int f = next_frame_;
+  MarkerFrameReport fr;
+  fr.frame = f;
+  std::vector<int> entries;
+  for (std::size_t k = 0; k < map_.size(); ++k) {
+    if (data_.block<1, 3>(f, 3 * column_[k]).allFinite()) entries.push_back(static_cast<int>(k));
+    else fr.missing.push_back(map_[k].marker);
+  }
+  if (entries.empty())
+    throw InvalidInput("[tbsp::MarkerAnimation] frame " + std::to_string(f) + ": every mapped marker is missing (a gap in all of them)");
+  const auto t0 = Clock::now();
+  bool built = false;
+  Deformer& D = deformerFor(entries, built);
+  const bool cold = built || impl_->last != &D;
+  for (std::size_t h = 0; h < entries.size(); ++h)
+    D.d.setHandleTarget(static_cast<int>(h), data_.block<1, 3>(f, 3 * column_[std::size_t(entries[h])]).transpose());
+  const int its = cold ? options_.start_iterations : options_.iterations;
+  for (int i = 0; i < its; ++i) D.d.iterate();
+  D.last_used = f;
+  impl_->last = &D;
+  fr.rebuilt = built;
+  fr.markers_used = static_cast<int>(entries.size());
+  fr.seconds_deform = seconds_since(t0);
+  const auto t1 = Clock::now();
+  TriMesh m;
+  m.F = surface_.F;
+  m.V = impl_->transfer.apply(D.d.inputPositions());
+  fr.seconds_transfer = seconds_since(t1);
+  std::vector<double> res;
+  res.reserve(entries.size());
+  for (int k : entries)
+    res.push_back((m.V.row(map_[std::size_t(k)].vertex) - data_.block<1, 3>(f, 3 * column_[std::size_t(k)])).norm());
+  std::sort(res.begin(), res.end());
+  fr.median_residual = res[res.size() / 2];
+  fr.max_residual = res.back();
+  report_.frames.push_back(fr);
+  ++next_frame_;
+  report_progress(progress_, double(next_frame_) / double(data_.rows()), "frames");
+  out = std::move(m);
+  return true;
+}
+
+}  // namespace tbsp
