@@ -33,6 +33,7 @@
 #include "tbsp/plugins/constraints_json.h"
 #include "tbsp/plugins/fit_json.h"
 #include "tbsp/plugins/json_file.h"
+#include "tbsp/plugins/marker_map_json.h"
 #include "tbsp/plugins/tet_job_json.h"
 #include "tbsp/plugins/texture_json.h"
 
@@ -106,6 +107,7 @@ const std::map<std::string, Target>& targets() {
                        parse_tet_stiffness(load_json_file(p), 6, p, job);
                      }}},
       {"texture", {"t.json", [](const std::string& p) { parse_texture_constraints(load_json_file(p), p); }}},
+      {"marker_map", {"map.json", [](const std::string& p) { load_marker_map_json(p); }}},
   };
   return t;
 }

@@ -35,5 +35,6 @@ void add_tet_commands(CLI::App& app, CommandTable& table);      // tetdeform
 void add_texture_commands(CLI::App& app, CommandTable& table);  // texture
 void add_mocap_commands(CLI::App& app, CommandTable& table);    // mocap
 void add_stereo_commands(CLI::App& app, CommandTable& table);   // stereo, refine-stereo, refine-silhouette
+void add_animate_commands(CLI::App& app, CommandTable& table);  // animate
 
 }  // namespace tbsp::cli

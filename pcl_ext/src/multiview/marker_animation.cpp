@@ -50,15 +50,15 @@ void MarkerAnimation::setOptions(const MarkerAnimationOptions& o) {
 }
 
 void MarkerAnimation::setTemplate(const TriMesh& surface) {
-  surface_ = surface;
-  tets_ = TetMesh{};
+  template_ = surface;
+  template_tets_ = TetMesh{};
   tets_given_ = false;
   started_ = false;
 }
 
 void MarkerAnimation::setTemplate(const TriMesh& surface, const TetMesh& tets) {
-  surface_ = surface;
-  tets_ = tets;
+  template_ = surface;
+  template_tets_ = tets;
   tets_given_ = true;
   started_ = false;
 }
@@ -72,6 +72,9 @@ void MarkerAnimation::setMarkers(std::vector<std::string> names, Eigen::MatrixXd
 void MarkerAnimation::start() {
   const std::string who = "[tbsp::MarkerAnimation] ";
   const auto t0 = Clock::now();
+  started_ = false;
+  surface_ = template_;
+  tets_ = template_tets_;
   if (surface_.V.rows() < 4 || surface_.F.rows() < 4) throw InvalidInput(who + "the template is empty: set a closed surface mesh");
   if (!surface_.V.allFinite()) throw InvalidInput(who + "the template has non-finite vertices");
   if (names_.empty() || data_.rows() == 0) throw InvalidInput(who + "no marker trajectories: set markers with at least one frame");
@@ -95,8 +98,22 @@ void MarkerAnimation::start() {
   }
   auto present = [&](int f, std::size_t k) { return data_.block<1, 3>(f, 3 * column_[k]).allFinite(); };
 
-  // Similarity alignment on the first frame with >= 3 alignment markers present.
   report_ = MarkerAnimationReport{};
+  report_progress(progress_, 0.0, "tetrahedralize");
+  // In the template's own frame (the similarity is applied to the tets afterwards: TetGen and
+  // the decimation are not exactly invariant to it).
+  if (!tets_given_) {
+    try {
+      tets_ = options_.tets > 0 ? tetrahedralize_to_size(surface_, options_.tets) : tetrahedralize(surface_);
+    } catch (const Error& e) {
+      // Open, non-manifold or self-intersecting (parts modelled as overlapping shells): one
+      // tetrahedron per triangle (§10.8) instead of a volume.
+      tets_ = surface_to_tets(surface_);
+      report_.shell_tets = true;
+      report_.tetrahedralize_error = e.what();
+    }
+  }
+  // Similarity alignment on the first frame with >= 3 alignment markers present.
   if (options_.align) {
     int f0 = -1;
     for (int f = 0; f < data_.rows() && f0 < 0; ++f) {
@@ -125,19 +142,7 @@ void MarkerAnimation::start() {
     const Eigen::Matrix3d A = S.block<3, 3>(0, 0);
     const Eigen::RowVector3d t = S.block<3, 1>(0, 3).transpose();
     surface_.V = (surface_.V * A.transpose()).rowwise() + t;
-    if (tets_given_) tets_.V = (tets_.V * A.transpose()).rowwise() + t;
-  }
-  report_progress(progress_, 0.0, "tetrahedralize");
-  if (!tets_given_) {
-    try {
-      tets_ = options_.tets > 0 ? tetrahedralize_to_size(surface_, options_.tets) : tetrahedralize(surface_);
-    } catch (const Error& e) {
-      // Open, non-manifold or self-intersecting (parts modelled as overlapping shells): one
-      // tetrahedron per triangle (§10.8) instead of a volume.
-      tets_ = surface_to_tets(surface_);
-      report_.shell_tets = true;
-      report_.tetrahedralize_error = e.what();
-    }
+    tets_.V = (tets_.V * A.transpose()).rowwise() + t;
   }
   report_progress(progress_, 0.0, "transfer");
   DeformationTransferOptions to;

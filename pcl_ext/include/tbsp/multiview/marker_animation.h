@@ -123,8 +123,8 @@ private:
 
   MarkerAnimationOptions options_;
   ProgressCallback progress_;
-  TriMesh surface_;
-  TetMesh tets_;
+  TriMesh template_, surface_;  ///< as given; aligned (working copy)
+  TetMesh template_tets_, tets_;
   bool tets_given_ = false, started_ = false;
   std::vector<MarkerMapEntry> map_;
   std::vector<std::string> names_;
