@@ -33,7 +33,7 @@ struct MarkerAnimation::Deformer {
 };
 
 struct MarkerAnimation::Impl {
-  DeformationTransfer transfer;
+  DeformationTransfer transfer, tracked;
   std::map<std::vector<int>, std::unique_ptr<Deformer>> deformers;
   int last_frame = -1;
   const Deformer* last = nullptr;
@@ -149,6 +149,14 @@ void MarkerAnimation::start() {
   to.radius = options_.transfer_radius;
   impl_->transfer.setOptions(to);
   impl_->transfer.precompute(tets_, surface_.V);
+  tracked_.resize(0, 3);
+  if (tracked_rest_.rows() > 0) {
+    if (!tracked_rest_.allFinite()) throw InvalidInput(who + "a tracked point is not finite");
+    const Eigen::Matrix3d A = report_.alignment.block<3, 3>(0, 0);
+    const Eigen::RowVector3d t = report_.alignment.block<3, 1>(0, 3).transpose();
+    impl_->tracked.setOptions(to);
+    impl_->tracked.precompute(tets_, (tracked_rest_ * A.transpose()).rowwise() + t);
+  }
   impl_->deformers.clear();
   impl_->last = nullptr;
   report_.tet_vertices = tets_.V.rows();
@@ -213,7 +221,9 @@ bool MarkerAnimation::next(TriMesh& out) {
   const auto t1 = Clock::now();
   TriMesh m;
   m.F = surface_.F;
-  m.V = impl_->transfer.apply(D.d.inputPositions());
+  const Eigen::MatrixX3d X = D.d.inputPositions();
+  m.V = impl_->transfer.apply(X);
+  if (tracked_rest_.rows() > 0) tracked_ = impl_->tracked.apply(X);
   fr.seconds_transfer = seconds_since(t1);
   std::vector<double> res;
   res.reserve(entries.size());

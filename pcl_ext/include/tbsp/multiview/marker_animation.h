@@ -107,6 +107,11 @@ public:
   void setMarkerMap(std::vector<MarkerMapEntry> map) { map_ = std::move(map); started_ = false; }
   /// Trajectories: names (one per marker) and data (#frames x 3·#markers, NaN = gap).
   void setMarkers(std::vector<std::string> names, Eigen::MatrixXd data);
+  /// Points to follow besides the surface (template rest coordinates; e.g. joint centres inside
+  /// the body): carried by the tet deformation through the same transfer. Optional.
+  void setTrackedPoints(const Eigen::MatrixX3d& rest_points) { tracked_rest_ = rest_points; started_ = false; }
+  /// Positions of the tracked points at the last frame next() produced (marker units).
+  const Eigen::MatrixX3d& trackedPoints() const { return tracked_; }
 
   /// Validates, aligns, tetrahedralizes, precomputes the transfer. Called by the first next().
   void start();
@@ -130,6 +135,7 @@ private:
   std::vector<std::string> names_;
   Eigen::MatrixXd data_;
   std::vector<int> column_;  ///< per map entry: marker index in the trajectories
+  Eigen::MatrixX3d tracked_rest_, tracked_;
   int next_frame_ = 0;
   struct Impl;
   std::unique_ptr<Impl> impl_;
