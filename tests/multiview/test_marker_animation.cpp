@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <string>
 
 #include <Eigen/Geometry>
@@ -314,4 +315,42 @@ TEST(MarkerAnimationReal, CmuTakeDrivesTheHumanTemplate) {
   EXPECT_GT(gap_frames, 0);           // RBAC has a 30-frame gap
   EXPECT_FALSE(r.shell_tets) << r.tetrahedralize_error;
   EXPECT_LE(median(residuals), 10.0);  // mm; the issue's bound
+}
+
+TEST(MarkerMapJson, MalformedMapsNameTheFileAndTheItem) {
+  const auto dir = test::temp_dir("marker_map_json");
+  const std::vector<std::pair<std::string, std::string>> cases{
+      {"not json", "map.json"},
+      {"[1, 2]", "expected a JSON object"},
+      {"{}", "markers"},
+      {R"({"markers": []})", "is empty"},
+      {R"({"markers": [3]})", "markers[0]"},
+      {R"({"markers": [{"vertex": 1}]})", "markers[0].marker"},
+      {R"({"markers": [{"marker": "", "vertex": 1}]})", "markers[0].marker"},
+      {R"({"markers": [{"marker": "A"}]})", "markers[0].vertex"},
+      {R"({"markers": [{"marker": "A", "vertex": -1}]})", "markers[0].vertex"},
+      {R"({"markers": [{"marker": "A", "vertex": 1.5}]})", "markers[0].vertex"},
+      {R"({"markers": [{"marker": "A", "vertex": 1, "align": "yes"}]})", "markers[0].align"},
+      {R"({"markers": [{"marker": "A", "vertex": 1, "aling": true}]})", "aling"},
+      {R"({"markerz": []})", "markerz"},
+  };
+  for (const auto& [text, needle] : cases) {
+    const std::string path = (dir / "map.json").string();
+    std::ofstream(path) << text;
+    try {
+      load_marker_map_json(path);
+      ADD_FAILURE() << "no error for " << text;
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find("map.json"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << text << " -> " << e.what();
+    }
+  }
+  std::ofstream((dir / "ok.json").string()) << R"({"template": "t.obj", "markers": [{"marker": "A", "vertex": 1}, {"marker": "B", "vertex": 2, "align": false}]})";
+  const auto m = load_marker_map_json((dir / "ok.json").string());
+  ASSERT_EQ(m.size(), 2u);
+  EXPECT_EQ(m[1].marker, "B");
+  EXPECT_EQ(m[1].vertex, 2);
+  EXPECT_FALSE(m[1].align);
+  EXPECT_TRUE(m[0].align);
+  EXPECT_THROW(load_marker_map_json((dir / "missing.json").string()), FileError);
 }

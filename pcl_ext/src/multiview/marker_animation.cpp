@@ -234,8 +234,8 @@ bool MarkerAnimation::next(TriMesh& out) {
   fr.max_residual = res.back();
   report_.frames.push_back(fr);
   ++next_frame_;
-  report_progress(progress_, double(next_frame_) / double(data_.rows()), "frames");
   out = std::move(m);
+  report_progress(progress_, double(next_frame_) / double(data_.rows()), "frames");  // may throw Cancelled: the frame is out already
   return true;
 }
 

@@ -1,0 +1,131 @@
+// bench_capture_perf: marker-driven animation (issue 25, docs/performance_capture.md).
+//   bench_capture_perf [--repeats N]
+// 1. CMU 01_01 (42 markers, 2751 frames) drives the human base mesh (24k vertices) through a
+//    ~4.5k-tet control mesh: setup, per-frame deformation and transfer (medians over the take),
+//    frames per second, peak RSS. Repeated N times; the median take is reported.
+// 2. The transfer to surfaces of 24k, ~50k and 98k vertices (the template; its lower half and all
+//    of it midpoint-subdivided) on the same control mesh: median ms per frame over 300 frames.
+// Performance capture from video (PerformanceCapture) is not built yet: no row for it.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "tbsp/deform/deformation_transfer.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/io/mocap_io.h"
+#include "tbsp/mesh/remeshing.h"
+#include "tbsp/mesh/tetrahedralize.h"
+#include "tbsp/multiview/marker_animation.h"
+#include "tbsp/plugins/marker_map_json.h"
+
+using namespace tbsp;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+double peak_rss_mb() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+  return 0;
+}
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0.0 : v[v.size() / 2];
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  int repeats = 3;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--repeats") && i + 1 < argc) repeats = std::max(1, std::atoi(argv[++i]));
+    else {
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N]\n");
+      return 2;
+    }
+  }
+  const std::string shared = TBSP_SHARED_DATA_DIR;
+  const MarkerTrajectories mk = read_c3d(shared + "/capture/surenkum__c3d_to_xyz/01_01.c3d");
+  const TriMesh tmpl = read_mesh(shared + "/meshes/dengnantianjie__3dcoursework/bunny/data/FinalBaseMesh.obj");
+  const auto map = load_marker_map_json(std::string(TBSP_SAMPLE_DATA_DIR) + "/markers/cmu_finalbasemesh_map.json");
+
+  struct Take {
+    double setup = 0, wall = 0, deform = 0, transfer = 0, residual = 0;
+    long tets = 0, tet_vertices = 0;
+  };
+  std::vector<Take> takes;
+  std::vector<Eigen::MatrixX3d> tet_positions;  // of the last take, every 10th frame (for part 2)
+  TetMesh rest_tets;
+  for (int r = 0; r < repeats; ++r) {
+    MarkerAnimation anim;
+    anim.setTemplate(tmpl);
+    anim.setMarkerMap(map);
+    anim.setMarkers(mk.names, mk.data);
+    const auto t0 = Clock::now();
+    anim.start();
+    TriMesh m;
+    std::vector<double> d, t, res;
+    while (anim.next(m)) {
+      d.push_back(anim.report().frames.back().seconds_deform);
+      t.push_back(anim.report().frames.back().seconds_transfer);
+      res.push_back(anim.report().frames.back().median_residual);
+    }
+    Take k;
+    k.wall = since(t0);
+    k.setup = anim.report().seconds_setup;
+    k.deform = median(d);
+    k.transfer = median(t);
+    k.residual = median(res);
+    k.tets = long(anim.report().tets);
+    k.tet_vertices = long(anim.report().tet_vertices);
+    takes.push_back(k);
+  }
+  std::sort(takes.begin(), takes.end(), [](const Take& a, const Take& b) { return a.wall < b.wall; });
+  const Take& k = takes[takes.size() / 2];
+  std::printf("## Marker animation: CMU 01_01 (%d frames, %zu mapped markers) on the human base mesh (median of %d takes)\n\n", mk.numFrames(),
+              map.size(), repeats);
+  std::printf("| surface vertices | tet vertices / tets | setup (s) | deform per frame (ms) | frames/s (deformation) | transfer per frame (ms) | "
+              "whole take (s) | median marker residual (mm) | peak RSS (MB) |\n|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("| %ld | %ld / %ld | %.2f | %.2f | %.0f | %.2f | %.1f | %.1f | %.0f |\n", long(tmpl.V.rows()), k.tet_vertices, k.tets, k.setup,
+              1000 * k.deform, 1.0 / k.deform, 1000 * k.transfer, k.wall, k.residual, peak_rss_mb());
+
+  // Part 2: bigger surfaces on the same control mesh (the template's, 5000 tets asked): the
+  // first 300 frames; median transfer time per frame.
+  const TetMesh tets = tetrahedralize_to_size(tmpl, 5000);
+  std::vector<TriMesh> surfaces{tmpl};
+  {
+    std::vector<char> half(std::size_t(tmpl.F.rows()), 0);
+    for (std::size_t f = 0; f < half.size(); ++f)  // the faces of the lower half of the body split
+      half[f] = tmpl.V(tmpl.F(Eigen::Index(f), 0), 1) < 0.45 * tmpl.V.col(1).maxCoeff();
+    const SubdivisionResult a = adaptive_subdivide(tmpl.V, tmpl.F, half);
+    const SubdivisionResult b = adaptive_subdivide(tmpl.V, tmpl.F, std::vector<char>(std::size_t(tmpl.F.rows()), 1));
+    TriMesh ma, mb;
+    ma.V = a.V;
+    ma.F = a.F;
+    mb.V = b.V;
+    mb.F = b.F;
+    surfaces.push_back(ma);
+    surfaces.push_back(mb);
+  }
+  std::printf("\n## Transfer to the surface (same control mesh, %ld tets; first 300 frames)\n\n| surface vertices | precompute (s) | transfer per frame (ms) |\n|---|---|---|\n",
+              long(tets.T.rows()));
+  for (const TriMesh& sfc : surfaces) {
+    MarkerAnimation anim;
+    anim.setTemplate(sfc, tets);
+    anim.setMarkerMap(map);  // the map's vertices keep their indices (subdivision appends)
+    anim.setMarkers(mk.names, mk.data.topRows(300));
+    const auto t0 = Clock::now();
+    anim.start();
+    const double setup = since(t0);
+    TriMesh m;
+    std::vector<double> t;
+    while (anim.next(m)) t.push_back(anim.report().frames.back().seconds_transfer);
+    std::printf("| %ld | %.2f | %.2f |\n", long(sfc.V.rows()), setup, 1000 * median(t));
+  }
+  return 0;
+}
