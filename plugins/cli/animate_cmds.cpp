@@ -86,7 +86,13 @@ int cmd_animate(const AnimateArgs& a) {
   const MarkerTrajectories mk = ext == ".c3d" ? read_c3d(a.markers) : read_trc(a.markers);
   const auto [f0, f1] = parse_range(a.frames, mk);
   const TriMesh tmpl = read_mesh(a.mesh);
-  std::vector<MarkerMapEntry> map = load_marker_map_json(a.map);
+  const MarkerMap map = load_marker_map(a.map);
+  std::vector<std::vector<int>> rigid;
+  try {
+    rigid = rigid_region_vertices(map, tmpl);
+  } catch (const InvalidInput& e) {
+    throw InvalidInput(a.map + ": " + e.what());
+  }
   std::error_code ec;
   fs::create_directories(a.out, ec);
   if (ec || !fs::is_directory(a.out)) throw FileError("'" + a.out + "': cannot create the output folder (" + ec.message() + ")");
@@ -96,7 +102,8 @@ int cmd_animate(const AnimateArgs& a) {
   o.align = !a.no_align;
   anim.setOptions(o);
   anim.setTemplate(tmpl);
-  anim.setMarkerMap(map);
+  anim.setMarkerMap(map.markers);
+  anim.setRigidRegions(rigid);
   anim.setMarkers(mk.names, mk.data.middleRows(f0 - mk.first_frame, f1 - f0 + 1));
   ProgressBar bar(!a.quiet);
   anim.setProgressCallback(bar.callback());
@@ -152,6 +159,7 @@ int cmd_animate(const AnimateArgs& a) {
   rep["control_mesh"] = {{"tet_vertices", r.tet_vertices}, {"tets", r.tets}, {"shell_tets", r.shell_tets}};
   if (r.shell_tets) rep["control_mesh"]["tetrahedralize_error"] = r.tetrahedralize_error;
   rep["deformers_built"] = r.deformers_built;
+  rep["rigid_region_tets"] = r.rigid_region_tets;
   rep["frames_with_gaps"] = with_gaps;
   rep["median_of_frame_median_residuals"] = sorted.empty() ? 0.0 : sorted[sorted.size() / 2];
   rep["max_residual"] = worst;

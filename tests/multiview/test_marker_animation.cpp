@@ -82,6 +82,50 @@ TEST(MarkerAnimation, FollowsTheGroundTruthPerformer) {
   EXPECT_LT(worst, 0.02);     // measured 1.13 % (40 markers on a performer of 7 separate parts)
 }
 
+// The performer's head moves rigidly in its scripted motion: as a rigid region it keeps its
+// shape at least as well as without (its markers alone would let it bend).
+TEST(MarkerAnimation, RigidRegionKeepsTheHeadRigid) {
+  const AnimSetup s = make_anim_setup("marker_rigid", 10, 30);
+  const synth::Humanoid h = synth::make_humanoid(1);
+  std::vector<int> head;
+  for (std::size_t v = 0; v < h.part.size(); ++v)
+    if (h.part[v] == 1) head.push_back(int(v));
+  auto head_error = [&](bool rigid) {
+    MarkerAnimation anim;
+    MarkerAnimationOptions o;
+    o.tets = 3000;
+    anim.setOptions(o);
+    anim.setTemplate(s.rest);
+    anim.setMarkerMap(s.map);
+    if (rigid) anim.setRigidRegions({head});
+    anim.setMarkers(s.markers.names, s.markers.data);
+    TriMesh m;
+    double worst = 0;
+    int f = 0;
+    while (anim.next(m)) {
+      const TriMesh gt = read_mesh(s.studio.groundTruthPath(f++));
+      // Shape error of the head: after removing its best rigid motion (Umeyama, no scale).
+      Eigen::Matrix3Xd a(3, head.size()), b(3, head.size());
+      for (std::size_t k = 0; k < head.size(); ++k) {
+        a.col(Eigen::Index(k)) = m.V.row(head[k]).transpose();
+        b.col(Eigen::Index(k)) = gt.V.row(head[k]).transpose();
+      }
+      const Eigen::Matrix4d T = Eigen::umeyama(a, b, false);
+      double e = 0;
+      for (Eigen::Index k = 0; k < a.cols(); ++k) e += (T.block<3, 3>(0, 0) * a.col(k) + T.block<3, 1>(0, 3) - b.col(k)).norm();
+      worst = std::max(worst, e / double(a.cols()) / s.diag);
+    }
+    if (rigid) {
+      EXPECT_EQ(anim.report().rigid_region_tets.size(), 1u);
+    }
+    return worst;
+  };
+  const double free_head = head_error(false), rigid_head = head_error(true);
+  std::printf("  head shape error (after its best rigid motion), worst frame: free %.3f %% | rigid region %.3f %% of the diagonal\n",
+              100 * free_head, 100 * rigid_head);
+  EXPECT_LE(rigid_head, free_head * 1.01);
+}
+
 TEST(MarkerAnimation, GapsAreDroppedForTheirFramesNotZeroed) {
   AnimSetup s = make_anim_setup("marker_gaps", 12, 30);
   // Marker 3 is missing in frames 4..7, marker 5 in frame 9.
@@ -172,7 +216,8 @@ TEST(MarkerAnimationReal, CmuTakeDrivesTheHumanTemplate) {
   TBSP_REQUIRE_FILE(obj);
   const MarkerTrajectories mk = read_c3d(c3d);
   const TriMesh tmpl = read_mesh(obj);
-  const auto map = load_marker_map_json(test::sample("markers/cmu_finalbasemesh_map.json"));
+  const MarkerMap mmap = load_marker_map(test::sample("markers/cmu_finalbasemesh_map.json"));
+  const auto& map = mmap.markers;
   MarkerAnimation anim;
   anim.setTemplate(tmpl);
   anim.setMarkerMap(map);
@@ -333,6 +378,13 @@ TEST(MarkerMapJson, MalformedMapsNameTheFileAndTheItem) {
       {R"({"markers": [{"marker": "A", "vertex": 1, "align": "yes"}]})", "markers[0].align"},
       {R"({"markers": [{"marker": "A", "vertex": 1, "aling": true}]})", "aling"},
       {R"({"markerz": []})", "markerz"},
+      {R"({"markers": [{"marker": "A", "vertex": 1}], "rigid_regions": 3})", "rigid_regions"},
+      {R"({"markers": [{"marker": "A", "vertex": 1}], "rigid_regions": [{"name": "h"}]})", "rigid_regions[0]"},
+      {R"({"markers": [{"marker": "A", "vertex": 1}], "rigid_regions": [{"vertices": [1], "box": [[0,0,0],[1,1,1]]}]})", "exactly one"},
+      {R"({"markers": [{"marker": "A", "vertex": 1}], "rigid_regions": [{"vertices": []}]})", "rigid_regions[0].vertices"},
+      {R"({"markers": [{"marker": "A", "vertex": 1}], "rigid_regions": [{"vertices": [2, -4]}]})", "rigid_regions[0].vertices[1]"},
+      {R"({"markers": [{"marker": "A", "vertex": 1}], "rigid_regions": [{"box": [[0,0,0]]}]})", "rigid_regions[0].box"},
+      {R"({"markers": [{"marker": "A", "vertex": 1}], "rigid_regions": [{"box": [[1,0,0],[0,1,1]]}]})", "lower one"},
   };
   for (const auto& [text, needle] : cases) {
     const std::string path = (dir / "map.json").string();
@@ -353,4 +405,20 @@ TEST(MarkerMapJson, MalformedMapsNameTheFileAndTheItem) {
   EXPECT_FALSE(m[1].align);
   EXPECT_TRUE(m[0].align);
   EXPECT_THROW(load_marker_map_json((dir / "missing.json").string()), FileError);
+  // Rigid regions: a list, or a box resolved against the template; an empty box is an error.
+  std::ofstream((dir / "rigid.json").string())
+      << R"({"markers": [{"marker": "A", "vertex": 1}], "rigid_regions": [{"name": "a", "vertices": [0, 2]}, {"name": "top", "box": [[-9, 0.5, -9], [9, 9, 9]]}, {"name": "none", "box": [[5, 5, 5], [6, 6, 6]]}]})";
+  MarkerMap mm = load_marker_map((dir / "rigid.json").string());
+  ASSERT_EQ(mm.rigid_regions.size(), 3u);
+  TriMesh t;
+  t.V.resize(4, 3);
+  t.V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1;
+  t.F.resize(1, 3);
+  t.F << 0, 1, 2;
+  EXPECT_THROW(rigid_region_vertices(mm, t), InvalidInput);  // "none" holds no vertex
+  mm.rigid_regions.pop_back();
+  const auto rv = rigid_region_vertices(mm, t);
+  ASSERT_EQ(rv.size(), 2u);
+  EXPECT_EQ(rv[0], (std::vector<int>{0, 2}));
+  EXPECT_EQ(rv[1], (std::vector<int>{2}));
 }

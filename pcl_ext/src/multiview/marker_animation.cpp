@@ -9,6 +9,7 @@
 #include "tbsp/core/timer.h"
 #include "tbsp/deform/deformation_transfer.h"
 #include "tbsp/deform/tet_deformer.h"
+#include "tbsp/mesh/point_search.h"
 #include "tbsp/mesh/tet_mesh.h"
 #include "tbsp/mesh/tetrahedralize.h"
 
@@ -113,6 +114,31 @@ void MarkerAnimation::start() {
       report_.tetrahedralize_error = e.what();
     }
   }
+  // Rigid regions: the tets whose barycentre's nearest template vertex is in the set.
+  rigid_tets_.clear();
+  if (!rigid_sets_.empty()) {
+    std::vector<int> owner(std::size_t(surface_.V.rows()), -1);
+    for (std::size_t r = 0; r < rigid_sets_.size(); ++r)
+      for (int v : rigid_sets_[r]) {
+        if (v < 0 || v >= surface_.V.rows())
+          throw InvalidInput(who + "rigid region " + std::to_string(r) + " names vertex " + std::to_string(v) + ", but the template has " +
+                             std::to_string(surface_.V.rows()) + " vertices");
+        owner[std::size_t(v)] = int(r);
+      }
+    const PointSearch ps(surface_.V);
+    rigid_tets_.assign(rigid_sets_.size(), {});
+    for (Eigen::Index t = 0; t < tets_.T.rows(); ++t) {
+      Eigen::Vector3d c = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 4; ++k) c += tets_.V.row(tets_.T(t, k)).transpose() / 4.0;
+      const int o = owner[std::size_t(ps.nearest(c))];
+      if (o >= 0) rigid_tets_[std::size_t(o)].push_back(int(t));
+    }
+    for (std::size_t r = 0; r < rigid_tets_.size(); ++r) {
+      if (rigid_tets_[r].empty())
+        throw InvalidInput(who + "rigid region " + std::to_string(r) + " covers no tetrahedron of the control mesh: give it more vertices");
+      report_.rigid_region_tets.push_back(int(rigid_tets_[r].size()));
+    }
+  }
   // Similarity alignment on the first frame with >= 3 alignment markers present.
   if (options_.align) {
     int f0 = -1;
@@ -183,6 +209,7 @@ MarkerAnimation::Deformer& MarkerAnimation::deformerFor(const std::vector<int>& 
   auto& s = impl_->deformers[entries];
   s.reset(new Deformer);
   s->d.setMesh(tets_);
+  for (const auto& r : rigid_tets_) s->d.addRigidRegion(r);
   s->entries = entries;
   for (int k : entries) {
     const Eigen::Vector3d p = surface_.V.row(map_[std::size_t(k)].vertex).transpose();

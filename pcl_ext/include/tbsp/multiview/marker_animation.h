@@ -26,7 +26,8 @@
 ///
 /// Units: those of the markers (C3D is usually mm). Errors (InvalidInput): a map entry naming a
 /// marker the trajectories do not have or a vertex the template does not have, fewer than 3
-/// alignment markers present in the first frame, an invalid template or options.
+/// alignment markers present in the first frame, a rigid region naming a missing vertex or
+/// covering no tetrahedron, an invalid template or options.
 
 #include <Eigen/Core>
 #include <map>
@@ -80,6 +81,7 @@ struct MarkerAnimationReport {
   bool shell_tets = false;
   std::string tetrahedralize_error;
   int deformers_built = 0;
+  std::vector<int> rigid_region_tets;   ///< tetrahedra per rigid region
   double seconds_setup = 0;
   std::vector<MarkerFrameReport> frames;
 };
@@ -107,6 +109,10 @@ public:
   void setMarkerMap(std::vector<MarkerMapEntry> map) { map_ = std::move(map); started_ = false; }
   /// Trajectories: names (one per marker) and data (#frames x 3·#markers, NaN = gap).
   void setMarkers(std::vector<std::string> names, Eigen::MatrixXd data);
+  /// Optional rigid regions (§7.2: TetDeformer rigid regions), each a set of template vertices;
+  /// the control mesh's tetrahedra nearest to them move as one rigid body (e.g. the head, whose
+  /// markers then cannot squash it).
+  void setRigidRegions(std::vector<std::vector<int>> vertex_sets) { rigid_sets_ = std::move(vertex_sets); started_ = false; }
   /// Points to follow besides the surface (template rest coordinates; e.g. joint centres inside
   /// the body): carried by the tet deformation through the same transfer. Optional.
   void setTrackedPoints(const Eigen::MatrixX3d& rest_points) { tracked_rest_ = rest_points; started_ = false; }
@@ -136,6 +142,7 @@ private:
   Eigen::MatrixXd data_;
   std::vector<int> column_;  ///< per map entry: marker index in the trajectories
   Eigen::MatrixX3d tracked_rest_, tracked_;
+  std::vector<std::vector<int>> rigid_sets_, rigid_tets_;
   int next_frame_ = 0;
   struct Impl;
   std::unique_ptr<Impl> impl_;
