@@ -14,7 +14,8 @@
 #include <string>
 #include <vector>
 
-#include "tbsp/deform/deformation_transfer.h"
+#include "bench_util.h"
+
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/mocap_io.h"
 #include "tbsp/mesh/remeshing.h"
@@ -23,22 +24,7 @@
 #include "tbsp/plugins/marker_map_json.h"
 
 using namespace tbsp;
-using Clock = std::chrono::steady_clock;
-
-namespace {
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-double peak_rss_mb() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
-  return 0;
-}
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
-}  // namespace
+using namespace tbsp::bench;
 
 int main(int argc, char** argv) {
   int repeats = 3;

@@ -22,6 +22,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "bench_util.h"
 #include "tbsp/core/huge_pages.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/io/mesh_io.h"
@@ -30,22 +31,10 @@
 #include "tbsp/plugins/synth_studio.h"
 
 using namespace tbsp;
-using Clock = std::chrono::steady_clock;
+using namespace tbsp::bench;
 namespace fs = std::filesystem;
 
 namespace {
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-double peak_rss_mb() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
-  return 0;
-}
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
 double raw_sgbm_seconds(const cv::Mat& L, const cv::Mat& R, int min_d, int num, int repeats) {
   auto m = cv::StereoSGBM::create(min_d, num, 5, 8 * 3 * 25, 32 * 3 * 25, -1, 63, 5, 0, 0, cv::StereoSGBM::MODE_SGBM_3WAY);
   std::vector<double> t;

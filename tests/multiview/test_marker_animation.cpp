@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <string>
 
 #include <Eigen/Geometry>
@@ -49,17 +50,25 @@ AnimSetup make_anim_setup(const std::string& name, int frames, int markers) {
   return s;
 }
 
+// A MarkerAnimation over the setup's template, map and markers, with `tets` control tetrahedra.
+std::unique_ptr<MarkerAnimation> make_animation(const AnimSetup& s, Eigen::Index tets, const std::vector<std::vector<int>>& rigid = {}) {
+  auto anim = std::make_unique<MarkerAnimation>();
+  MarkerAnimationOptions o;
+  o.tets = tets;
+  anim->setOptions(o);
+  anim->setTemplate(s.rest);
+  anim->setMarkerMap(s.map);
+  anim->setRigidRegions(rigid);
+  anim->setMarkers(s.markers.names, s.markers.data);
+  return anim;
+}
+
 }  // namespace
 
 TEST(MarkerAnimation, FollowsTheGroundTruthPerformer) {
   const AnimSetup s = make_anim_setup("marker_anim", 25, 40);
-  MarkerAnimation anim;
-  MarkerAnimationOptions o;
-  o.tets = 3000;
-  anim.setOptions(o);
-  anim.setTemplate(s.rest);
-  anim.setMarkerMap(s.map);
-  anim.setMarkers(s.markers.names, s.markers.data);
+  const auto ap = make_animation(s, 3000);
+  MarkerAnimation& anim = *ap;
   TriMesh m;
   double worst = 0, med_res = 0;
   int frames = 0;
@@ -91,14 +100,8 @@ TEST(MarkerAnimation, RigidRegionKeepsTheHeadRigid) {
   for (std::size_t v = 0; v < h.part.size(); ++v)
     if (h.part[v] == 1) head.push_back(int(v));
   auto head_error = [&](bool rigid) {
-    MarkerAnimation anim;
-    MarkerAnimationOptions o;
-    o.tets = 3000;
-    anim.setOptions(o);
-    anim.setTemplate(s.rest);
-    anim.setMarkerMap(s.map);
-    if (rigid) anim.setRigidRegions({head});
-    anim.setMarkers(s.markers.names, s.markers.data);
+    const auto ap = make_animation(s, 3000, rigid ? std::vector<std::vector<int>>{head} : std::vector<std::vector<int>>{});
+    MarkerAnimation& anim = *ap;
     TriMesh m;
     double worst = 0;
     int f = 0;
@@ -131,13 +134,8 @@ TEST(MarkerAnimation, GapsAreDroppedForTheirFramesNotZeroed) {
   // Marker 3 is missing in frames 4..7, marker 5 in frame 9.
   for (int f = 4; f <= 7; ++f) s.markers.data.block<1, 3>(f, 9).setConstant(NAN);
   s.markers.data.block<1, 3>(9, 15).setConstant(NAN);
-  MarkerAnimation anim;
-  MarkerAnimationOptions o;
-  o.tets = 2000;
-  anim.setOptions(o);
-  anim.setTemplate(s.rest);
-  anim.setMarkerMap(s.map);
-  anim.setMarkers(s.markers.names, s.markers.data);
+  const auto ap = make_animation(s, 2000);
+  MarkerAnimation& anim = *ap;
   TriMesh m;
   int frames = 0;
   while (anim.next(m)) {
