@@ -157,6 +157,31 @@ TEST(MarkerAnimation, GapsAreDroppedForTheirFramesNotZeroed) {
   EXPECT_EQ(r.deformers_built, 3);
 }
 
+// A separate part whose markers are all missing in a frame has nothing to follow: a clear error
+// naming the frame and the missing markers, after the frames before it came out.
+TEST(MarkerAnimation, APartWithAllItsMarkersMissingIsAClearError) {
+  AnimSetup s = make_anim_setup("marker_part_gap", 6, 30);
+  const synth::Humanoid h = synth::make_humanoid(1);
+  int blanked = 0;
+  for (int k = 0; k < s.markers.numMarkers(); ++k)
+    if (h.part[std::size_t(std::stoi(s.markers.names[std::size_t(k)].substr(1)))] == 1) {  // the head
+      s.markers.data.block<1, 3>(3, 3 * k).setConstant(NAN);
+      ++blanked;
+    }
+  ASSERT_GT(blanked, 0);
+  const auto ap = make_animation(s, 2000);
+  TriMesh m;
+  int frames = 0;
+  try {
+    while (ap->next(m)) ++frames;
+    ADD_FAILURE() << "no error";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("frame 3"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("missing: V"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(frames, 3);
+}
+
 TEST(MarkerAnimation, BadInputGivesClearErrors) {
   TriMesh rest = synth::make_humanoid(0).mesh;
   Eigen::MatrixXd data = Eigen::MatrixXd::Zero(2, 9);

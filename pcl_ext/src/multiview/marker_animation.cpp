@@ -234,12 +234,25 @@ bool MarkerAnimation::next(TriMesh& out) {
     throw InvalidInput("[tbsp::MarkerAnimation] frame " + std::to_string(f) + ": every mapped marker is missing (a gap in all of them)");
   const auto t0 = Clock::now();
   bool built = false;
-  Deformer& D = deformerFor(entries, built);
-  const bool cold = built || impl_->last != &D;
-  for (std::size_t h = 0; h < entries.size(); ++h)
-    D.d.setHandleTarget(static_cast<int>(h), data_.block<1, 3>(f, 3 * column_[std::size_t(entries[h])]).transpose());
-  const int its = cold ? options_.start_iterations : options_.iterations;
-  for (int i = 0; i < its; ++i) D.d.iterate();
+  Deformer* Dp = nullptr;
+  bool cold = false;
+  try {
+    Dp = &deformerFor(entries, built);
+    cold = built || impl_->last != Dp;
+    for (std::size_t h = 0; h < entries.size(); ++h)
+      Dp->d.setHandleTarget(static_cast<int>(h), data_.block<1, 3>(f, 3 * column_[std::size_t(entries[h])]).transpose());
+    const int its = cold ? options_.start_iterations : options_.iterations;
+    for (int i = 0; i < its; ++i) Dp->d.iterate();  // the first iteration factorizes
+  } catch (const InvalidInput& e) {
+    if (impl_->last == Dp) impl_->last = nullptr;
+    impl_->deformers.erase(entries);
+    std::string miss;
+    for (const auto& n : fr.missing) miss += (miss.empty() ? "" : ", ") + n;
+    throw InvalidInput("[tbsp::MarkerAnimation] frame " + std::to_string(f) + " (missing: " + (miss.empty() ? "none" : miss) +
+                       "): the markers present cannot drive the template (" + e.what() +
+                       "); a part of the template whose markers are all missing has nothing to follow: map more markers on it");
+  }
+  Deformer& D = *Dp;
   D.last_used = f;
   impl_->last = &D;
   fr.rebuilt = built;
