@@ -26,6 +26,7 @@
 #include "tbsp/core/huge_pages.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/io/mesh_io.h"
+#include "tbsp/mesh/topology.h"
 #include "tbsp/multiview/model_guided_stereo.h"
 #include "tbsp/multiview/stereo_depth_fusion.h"
 #include "tbsp/plugins/synth_studio.h"
@@ -155,19 +156,10 @@ int main(int argc, char** argv) {
   StudioFrame fr2;
   if (!stream2.next(fr2)) return 1;
   TriMesh mesh = read_mesh(st2.groundTruthPath(fr2.frame));
-  {
-    std::vector<std::vector<int>> nb(mesh.V.rows());
-    for (Eigen::Index f = 0; f < mesh.F.rows(); ++f)
-      for (int k = 0; k < 3; ++k) nb[mesh.F(f, k)].push_back(mesh.F(f, (k + 1) % 3));
-    for (int it = 0; it < 20; ++it) {
-      Eigen::MatrixX3d W = mesh.V;
-      for (Eigen::Index i = 0; i < W.rows(); ++i) {
-        Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
-        for (int j : nb[i]) c += mesh.V.row(j);
-        if (!nb[i].empty()) W.row(i) = 0.5 * mesh.V.row(i) + 0.5 * c / double(nb[i].size());
-      }
-      mesh.V = W;
-    }
+  {  // 20 umbrella smoothing steps, as in the test
+    const auto adj = vertex_adjacency(mesh.F, mesh.V.rows());
+    const std::vector<char> all(std::size_t(mesh.V.rows()), 1);
+    for (int it = 0; it < 20; ++it) umbrella_step(mesh.V, adj, all, 0.5);
   }
   ModelGuidedStereo mvs;
   std::vector<double> ts, tfit;

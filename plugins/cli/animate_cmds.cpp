@@ -77,11 +77,7 @@ TriMesh y_up(const TriMesh& m, const Eigen::Matrix4d& alignment) {
 }
 
 int cmd_animate(const AnimateArgs& a) {
-  const std::string ext = [&] {
-    std::string e = fs::path(a.markers).extension().string();
-    for (char& ch : e) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-    return e;
-  }();
+  const std::string ext = lower_ext(a.markers);
   if (ext != ".c3d" && ext != ".trc") throw InvalidInput(a.markers + ": expected a .c3d or .trc file of marker trajectories");
   const MarkerTrajectories mk = ext == ".c3d" ? read_c3d(a.markers) : read_trc(a.markers);
   const auto [f0, f1] = parse_range(a.frames, mk);

@@ -4,8 +4,11 @@
 // codes (0 ok, 2 invalid input, 3 numerical failure, 130 cancelled, 1 anything else).
 #include <CLI/CLI.hpp>
 
+#include <cctype>
+#include <filesystem>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace tbsp::cli {
@@ -15,6 +18,13 @@ struct Command {
   std::function<int()> run;    ///< runs it with the parsed options; returns the exit code
 };
 using CommandTable = std::vector<Command>;
+
+/// The file's extension in lower case, with the dot (".c3d"); "" when it has none.
+inline std::string lower_ext(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  for (char& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return e;
+}
 
 /// Registers a command written as `add_X(app, args, sub)` + `cmd_X(args)`: the options live
 /// in a shared Args object that the run function receives.

@@ -20,12 +20,6 @@ namespace tbsp::cli {
 
 namespace {
 
-std::string lower_ext(const std::string& path) {
-  std::string e = fs::path(path).extension().string();
-  for (char& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return e;
-}
-
 // Gaps of one marker: frames missing, number of runs of missing frames, longest run.
 struct MarkerGaps {
   int missing = 0, gaps = 0, longest = 0;

@@ -26,11 +26,7 @@ namespace tbsp::cli {
 
 namespace {
 
-bool is_tet_file(const std::string& p) {
-  std::string ext = fs::path(p).extension().string();
-  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return ext == ".mesh";
-}
+bool is_tet_file(const std::string& p) { return lower_ext(p) == ".mesh"; }
 
 double mean_tet_edge(const TetMesh& t) {
   double s = 0;

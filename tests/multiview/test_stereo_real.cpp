@@ -19,6 +19,7 @@
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/mesh/topology.h"
 #include "tbsp/multiview/model_guided_stereo.h"
 #include "tbsp/multiview/rasterizer.h"
 #include "tbsp/multiview/stereo_depth_fusion.h"
@@ -294,23 +295,10 @@ TEST(StereoFusion, InriaDancerProjectsInsideTheSilhouettes) {
 namespace {
 // 20 umbrella smoothing steps (λ = 0.5) take the detail (the performer's folds) away.
 Eigen::MatrixX3d smooth(const TriMesh& m, int steps) {
-  std::vector<std::vector<int>> nb(m.V.rows());
-  for (Eigen::Index f = 0; f < m.F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) {
-      nb[m.F(f, k)].push_back(m.F(f, (k + 1) % 3));
-      nb[m.F(f, k)].push_back(m.F(f, (k + 2) % 3));
-    }
+  const auto adj = vertex_adjacency(m.F, m.V.rows());
+  const std::vector<char> all(std::size_t(m.V.rows()), 1);
   Eigen::MatrixX3d V = m.V;
-  for (int s = 0; s < steps; ++s) {
-    Eigen::MatrixX3d W = V;
-    for (Eigen::Index i = 0; i < V.rows(); ++i) {
-      if (nb[i].empty()) continue;
-      Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
-      for (int j : nb[i]) c += V.row(j);
-      W.row(i) = 0.5 * V.row(i) + 0.5 * c / double(nb[i].size());
-    }
-    V = W;
-  }
+  for (int s = 0; s < steps; ++s) umbrella_step(V, adj, all, 0.5);
   return V;
 }
 double mean_angle_deg(const Eigen::MatrixX3d& A, const Eigen::MatrixX3d& B) {

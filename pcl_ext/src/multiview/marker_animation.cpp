@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
 #include <Eigen/Geometry>
 
@@ -27,10 +28,10 @@ bool MarkerAnimationOptions::isValid(std::string* why) const {
   return true;
 }
 
+// The deformer of one set of present markers (the cache key: map entries, in handle order).
 struct MarkerAnimation::Deformer {
   TetDeformer d;
-  std::vector<int> entries;  ///< map entries with a handle, in handle order
-  int last_used = -1;        ///< frame it last ran
+  int last_used = -1;  ///< frame it last ran
 };
 
 struct MarkerAnimation::Impl {
@@ -194,29 +195,26 @@ void MarkerAnimation::start() {
 }
 
 MarkerAnimation::Deformer& MarkerAnimation::deformerFor(const std::vector<int>& entries, bool& built) {
-  auto& slot = impl_->deformers[entries];
-  built = !slot;
-  if (slot) return *slot;
-  if (impl_->deformers.size() > 8) {  // keep the 8 most recently used sets
-    auto oldest = impl_->deformers.end();
-    for (auto it = impl_->deformers.begin(); it != impl_->deformers.end(); ++it)
-      if (it->second && (oldest == impl_->deformers.end() || it->second->last_used < oldest->second->last_used)) oldest = it;
-    if (oldest != impl_->deformers.end()) {
-      if (impl_->last == oldest->second.get()) impl_->last = nullptr;
-      impl_->deformers.erase(oldest);
-    }
+  auto& cache = impl_->deformers;
+  const auto found = cache.find(entries);
+  built = found == cache.end();
+  if (!built) return *found->second;
+  if (cache.size() >= 8) {  // keep the 8 most recently used sets
+    auto oldest = cache.begin();
+    for (auto it = cache.begin(); it != cache.end(); ++it)
+      if (it->second->last_used < oldest->second->last_used) oldest = it;
+    if (impl_->last == oldest->second.get()) impl_->last = nullptr;
+    cache.erase(oldest);
   }
-  auto& s = impl_->deformers[entries];
-  s.reset(new Deformer);
-  s->d.setMesh(tets_);
-  for (const auto& r : rigid_tets_) s->d.addRigidRegion(r);
-  s->entries = entries;
+  auto D = std::make_unique<Deformer>();
+  D->d.setMesh(tets_);
+  for (const auto& r : rigid_tets_) D->d.addRigidRegion(r);
   for (int k : entries) {
     const Eigen::Vector3d p = surface_.V.row(map_[std::size_t(k)].vertex).transpose();
-    s->d.addPointHandle(p, p);
+    D->d.addPointHandle(p, p);
   }
   ++report_.deformers_built;
-  return *s;
+  return *(cache[entries] = std::move(D));
 }
 
 bool MarkerAnimation::next(TriMesh& out) {

@@ -74,6 +74,13 @@ inline bool bilinear(const cv::Mat& g, const Eigen::Vector2d& p, float& out) {
   return true;
 }
 
+// A patch plane: normal n and an orthonormal tangent pair (u, v).
+struct TangentFrame {
+  Eigen::Vector3d n, u, v;
+  explicit TangentFrame(const Eigen::Vector3d& normal)
+      : n(normal), u((std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).cross(normal).normalized()), v(n.cross(u)) {}
+};
+
 // A reference patch centred once per depth sample; ncc() against each other view's patch.
 struct CenteredPatch {
   std::vector<double> d;  // a[k] - mean
@@ -216,13 +223,12 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
           if (static_cast<int>(others.size()) < o.min_views) continue;
           ++samples[i];
           const double h = d0 / f;  // one reference pixel per patch step at the initial depth
-          // Mean NCC over the other views of the l×l patch at depth d0 + t, tangent to `normal`.
-          auto score_at = [&](double t, const Eigen::Vector3d& normal) -> float {
-            const Eigen::Vector3d u = (std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).cross(normal).normalized();
-            const Eigen::Vector3d v = normal.cross(u);
+          // Mean NCC over the other views of the l×l patch at depth d0 + t, spanned by the
+          // tangent frame `tf`.
+          auto score_at = [&](double t, const TangentFrame& tf) -> float {
             const Eigen::Vector3d X = cam.backProject(Eigen::Vector2d(x, y), d0 + t);
             for (int b = -half, k = 0; b <= half; ++b)
-              for (int a = -half; a <= half; ++a, ++k) patch[k] = X + (a * u + b * v) * h;
+              for (int a = -half; a <= half; ++a, ++k) patch[k] = X + (a * tf.u + b * tf.v) * h;
             for (std::size_t k = 0; k < patch.size(); ++k)
               if (!bilinear(R.grey, cam.project(patch[k]), ref[k])) return -1.f;
             ref_c.set(ref);
@@ -238,7 +244,8 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
             }
             return cnt >= o.min_views ? sum / static_cast<float>(cnt) : -1.f;
           };
-          for (int s = 0; s < S; ++s) score[s] = score_at(-o.search_range + s * step, nn);
+          const TangentFrame mesh_frame(nn);
+          for (int s = 0; s < S; ++s) score[s] = score_at(-o.search_range + s * step, mesh_frame);
           int best = static_cast<int>(std::max_element(score.begin(), score.end()) - score.begin());
           if (best == 0 || best == S - 1 || score[best] < o.min_ncc) continue;  // no interior maximum
           float rest = -1.f;
@@ -248,24 +255,22 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
           // Patch orientation: the mesh normal tilted by normal_tilt_deg in 8 directions when
           // that correlates better at the maximum (a fold the mesh does not have yet); then the
           // depth again around the maximum with the chosen normal.
-          Eigen::Vector3d nbest = nn;
+          TangentFrame best_frame = mesh_frame;
           if (o.normal_tilt_deg > 0) {
-            const Eigen::Vector3d u = (std::abs(nn.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).cross(nn).normalized();
-            const Eigen::Vector3d v = nn.cross(u);
             const double tb = -o.search_range + best * step, ta = std::tan(o.normal_tilt_deg * M_PI / 180.0);
             float sbest = score[best];
             for (int dir = 0; dir < 8; ++dir) {
               const double phi = dir * M_PI / 4;
-              const Eigen::Vector3d cand = (nn + ta * (std::cos(phi) * u + std::sin(phi) * v)).normalized();
-              if (cand.dot((cam.center() - cam.backProject(Eigen::Vector2d(x, y), d0 + tb)).normalized()) < cos_max) continue;
+              const TangentFrame cand((nn + ta * (std::cos(phi) * mesh_frame.u + std::sin(phi) * mesh_frame.v)).normalized());
+              if (cand.n.dot((cam.center() - cam.backProject(Eigen::Vector2d(x, y), d0 + tb)).normalized()) < cos_max) continue;
               const float sc = score_at(tb, cand);
               if (sc > sbest) {
                 sbest = sc;
-                nbest = cand;
+                best_frame = cand;
               }
             }
-            if (nbest != nn)
-              for (int s = std::max(0, best - 2); s <= std::min(S - 1, best + 2); ++s) score[s] = score_at(-o.search_range + s * step, nbest);
+            if (best_frame.n != nn)
+              for (int s = std::max(0, best - 2); s <= std::min(S - 1, best + 2); ++s) score[s] = score_at(-o.search_range + s * step, best_frame);
             best = static_cast<int>(std::max_element(score.begin() + std::max(0, best - 2), score.begin() + std::min(S, best + 3)) - score.begin());
             if (best == 0 || best == S - 1 || score[best] < o.min_ncc) continue;
           }
@@ -274,7 +279,7 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
           const double off = den < 0 ? std::clamp(0.5 * (sa - sc) / den, -0.5, 0.5) : 0.0;
           const double t = -o.search_range + (best + off) * step;
           pts[i].push_back(cam.backProject(Eigen::Vector2d(x, y), d0 + t));
-          nrm[i].push_back(nbest);
+          nrm[i].push_back(best_frame.n);
           scores[i].push_back(static_cast<float>(sb));
           grid[i].at<float>(y / o.pixel_stride, x / o.pixel_stride) = static_cast<float>(d0 + t);
         }
