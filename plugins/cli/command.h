@@ -46,5 +46,6 @@ void add_texture_commands(CLI::App& app, CommandTable& table);  // texture
 void add_mocap_commands(CLI::App& app, CommandTable& table);    // mocap
 void add_stereo_commands(CLI::App& app, CommandTable& table);   // stereo, refine-stereo, refine-silhouette
 void add_animate_commands(CLI::App& app, CommandTable& table);  // animate
+void add_perf_capture_commands(CLI::App& app, CommandTable& table);  // capture
 
 }  // namespace tbsp::cli

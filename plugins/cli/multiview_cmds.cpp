@@ -17,6 +17,7 @@
 #include <pcl/conversions.h>
 
 #include "progress_bar.h"
+#include "studio_frames.h"
 #include "tbsp/core/error.h"
 #include "tbsp/core/timer.h"
 #include "tbsp/io/atomic_file.h"
@@ -70,14 +71,6 @@ void add_stereo(CLI::App& app, StereoArgs& a, CLI::App*& sub) {
   sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
 }
 
-void write_png(const std::string& path, const cv::Mat& m) {
-  atomic_write_with(path, [&](const std::string& tmp) {
-    const std::string t = tmp + ".png";
-    if (!cv::imwrite(t, m)) return false;
-    fs::rename(t, tmp);
-    return true;
-  });
-}
 
 // A float map as a 16-bit PNG image: value = round(v * factor) clamped to 65535; NaN and v <= 0 -> 0.
 cv::Mat to_u16(const cv::Mat& f, double factor) {
@@ -186,46 +179,7 @@ int run_pair(const StereoArgs& a) {
   return 0;
 }
 
-std::pair<int, int> parse_frames(const std::string& s, const Studio& st) {
-  if (s.empty()) return {st.first_frame, st.last_frame};
-  int a = 0, b = 0;
-  char c = 0;
-  std::istringstream is(s);
-  if (!(is >> a)) throw InvalidInput("--frames '" + s + "': expected a or a:b (frame numbers)");
-  b = a;
-  if (is >> c) {
-    if (c != ':' || !(is >> b)) throw InvalidInput("--frames '" + s + "': expected a or a:b (frame numbers)");
-  }
-  if (a > b || a < st.first_frame || b > st.last_frame)
-    throw InvalidInput("--frames " + s + " is outside the studio's frames " + std::to_string(st.first_frame) + ".." + std::to_string(st.last_frame));
-  return {a, b};
-}
 
-// Streams frames first..last of a studio with a progress bar over all of them: `run(frame,
-// progress)` gets each frame and a callback mapping its own [0, 1] into the frame's share.
-// Returns the number of frames run.
-int for_each_frame(const Studio& st, int first, int last, bool silhouettes, bool quiet,
-                   const std::function<void(const StudioFrame&, const ProgressCallback&, ProgressBar&)>& run) {
-  StudioFrameStream::Options so;
-  so.first = first;
-  so.last = last;
-  so.silhouettes = silhouettes;
-  StudioFrameStream stream(st, so);
-  ProgressBar bar(!quiet);
-  const ProgressCallback cb = bar.callback();
-  StudioFrame fr;
-  const int total = last - first + 1;
-  int done = 0;
-  while (stream.next(fr)) {
-    const int base = done;
-    const ProgressCallback frame_cb = [&](double x, const std::string& stage) {
-      return !cb || cb((base + x) / total, "frame " + std::to_string(fr.frame) + ": " + stage);
-    };
-    run(fr, frame_cb, bar);
-    ++done;
-  }
-  return done;
-}
 
 int run_studio(const StereoArgs& a) {
   const Studio st = read_studio(a.studio);

@@ -45,6 +45,14 @@ void DeformationTransfer::precompute(const TetMesh& tets, const Eigen::MatrixX3d
     Einv[std::size_t(j)] = E.inverse();
   }
   const PointSearch search(centers);
+  // A tet mesh of several parts (a template modelled as overlapping closed bodies): a vertex
+  // blends only the tets of the part its nearest tet belongs to, so an arm does not drag the
+  // torso along where the two are within r.
+  Eigen::VectorXi vlabel;
+  const bool parts = tet_connected_components(tets, vlabel) > 1;
+  std::vector<int> tet_part(static_cast<std::size_t>(m), 0);
+  if (parts)
+    for (Eigen::Index j = 0; j < m; ++j) tet_part[std::size_t(j)] = vlabel(tets.T(j, 0));
   std::vector<std::vector<std::pair<int, double>>> rows(static_cast<std::size_t>(N));
   Eigen::Index fallback = 0;
   double total_tets = 0;
@@ -62,6 +70,10 @@ void DeformationTransfer::precompute(const TetMesh& tets, const Eigen::MatrixX3d
     for (Eigen::Index i = b0; i < b1; ++i) {
       const Eigen::Vector3d p = hires.row(i).transpose();
       search.radius(p, r, found);
+      if (parts && found.size() > 1) {
+        const int part = tet_part[std::size_t(search.nearest(p))];
+        found.erase(std::remove_if(found.begin(), found.end(), [&](const auto& f) { return tet_part[std::size_t(f.first)] != part; }), found.end());
+      }
       if (found.empty()) {
         double d2;
         found.push_back({search.nearest(p, &d2), 0.0});

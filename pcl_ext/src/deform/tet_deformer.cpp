@@ -444,6 +444,25 @@ double TetDeformer::iterate() {
   return energy;
 }
 
+Eigen::MatrixXd TetDeformer::handleResponse(const std::vector<int>& vertices) {
+  prepare();
+  for (int v : vertices) checkVertex(v, "handleResponse");
+  const Eigen::Index nc = Eigen::Index(constrained_vertices_.size()), H = Eigen::Index(handles_.size());
+  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(nc, H);  // constrained vertex <- handle (unit move)
+  for (Eigen::Index i = 0; i < nc; ++i) {
+    const int h = constraint_handle_[std::size_t(i)];
+    if (h >= 0 && handles_[std::size_t(h)].kind != Handle::Region) E(i, h) = 1.0;
+  }
+  Eigen::MatrixXd Yf;
+  if (!free_vertices_.empty()) Yf = solver_->chol.solve(-(solver_->Lfc * E));
+  Eigen::MatrixXd out(Eigen::Index(vertices.size()), H);
+  for (std::size_t k = 0; k < vertices.size(); ++k) {
+    const int v = vertices[k], f = free_index_[std::size_t(v)];
+    out.row(Eigen::Index(k)) = f >= 0 ? Yf.row(f) : E.row(constrained_index_[std::size_t(v)]);
+  }
+  return out;
+}
+
 double TetDeformer::nonrigidEnergy(const Eigen::MatrixX3d& X) const {
   if (X.rows() != mesh_.V.rows()) throw InvalidInput("[tbsp::TetDeformer::nonrigidEnergy] wrong number of positions");
   double e = 0;

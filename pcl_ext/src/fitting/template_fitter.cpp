@@ -9,38 +9,11 @@
 #include "tbsp/core/error.h"
 #include "tbsp/core/timer.h"
 #include "tbsp/mesh/mesh_validation.h"
+#include "tbsp/mesh/point_search.h"
 #include "tbsp/solve/blas_threads.h"
 
 namespace tbsp {
 namespace {
-
-// Farthest-point sampling of k of the candidate vertices (template rest positions), starting
-// from the candidate nearest the template's centroid: deterministic, spread over the surface.
-std::vector<int> farthest_point_sample(const Eigen::MatrixX3d& V, const std::vector<int>& candidates, int k) {
-  std::vector<int> picked;
-  if (candidates.empty() || k <= 0) return picked;
-  const Eigen::RowVector3d c = V.colwise().mean();
-  std::size_t first = 0;
-  double best = std::numeric_limits<double>::infinity();
-  for (std::size_t i = 0; i < candidates.size(); ++i) {
-    const double d = (V.row(candidates[i]) - c).squaredNorm();
-    if (d < best) { best = d; first = i; }
-  }
-  std::vector<double> dist(candidates.size(), std::numeric_limits<double>::infinity());
-  std::size_t next = first;
-  while (int(picked.size()) < k) {
-    picked.push_back(candidates[next]);
-    double far = -1;
-    std::size_t arg = next;
-    for (std::size_t i = 0; i < candidates.size(); ++i) {
-      dist[i] = std::min(dist[i], (V.row(candidates[i]) - V.row(candidates[next])).squaredNorm());
-      if (dist[i] > far) { far = dist[i]; arg = i; }
-    }
-    if (far <= 0) break;  // every candidate picked
-    next = arg;
-  }
-  return picked;
-}
 
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                    const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <nanoflann.hpp>
 
 namespace tbsp {
@@ -80,6 +81,32 @@ double median_spacing(const PointSearch& tree, int samples) {
   if (d.empty()) return 0;
   std::nth_element(d.begin(), d.begin() + long(d.size() / 2), d.end());
   return d[d.size() / 2];
+}
+
+std::vector<int> farthest_point_sample(const Eigen::MatrixX3d& V, const std::vector<int>& candidates, int k) {
+  std::vector<int> picked;
+  if (candidates.empty() || k <= 0) return picked;
+  const Eigen::RowVector3d c = V.colwise().mean();
+  std::size_t first = 0;
+  double best = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < candidates.size(); ++i) {
+    const double d = (V.row(candidates[i]) - c).squaredNorm();
+    if (d < best) { best = d; first = i; }
+  }
+  std::vector<double> dist(candidates.size(), std::numeric_limits<double>::infinity());
+  std::size_t next = first;
+  while (int(picked.size()) < k) {
+    picked.push_back(candidates[next]);
+    double far = -1;
+    std::size_t arg = next;
+    for (std::size_t i = 0; i < candidates.size(); ++i) {
+      dist[i] = std::min(dist[i], (V.row(candidates[i]) - V.row(candidates[next])).squaredNorm());
+      if (dist[i] > far) { far = dist[i]; arg = i; }
+    }
+    if (far <= 0) break;  // every candidate picked
+    next = arg;
+  }
+  return picked;
 }
 
 }  // namespace tbsp

@@ -1,4 +1,5 @@
 #include "tbsp/mesh/tetrahedralize.h"
+#include "tbsp/mesh/topology.h"
 
 // CGAL's Garland-Heckbert quadrics (Eigen 4x4 temporaries) trip -Wmaybe-uninitialized inside
 // Eigen when instantiated here; the warning is in the library code, not ours.
@@ -297,6 +298,69 @@ TetMesh tetrahedralize_to_size(const TriMesh& surface, Eigen::Index target_tets,
   }
   if (decimated_surface) *decimated_surface = dec;
   return tets;
+}
+
+TetMesh tetrahedralize_components(const TriMesh& surface, Eigen::Index target_tets, const TetgenOptions& options,
+                                  TriMesh* decimated_surface) {
+  Eigen::VectorXi label;
+  const int nc = connected_components(surface.F, surface.V.rows(), label);
+  std::vector<int> order;  // components by first face
+  std::vector<char> seen(std::size_t(std::max(nc, 0)), 0);
+  for (Eigen::Index f = 0; f < surface.F.rows(); ++f) {
+    const int c = label(surface.F(f, 0));
+    if (!seen[std::size_t(c)]) {
+      seen[std::size_t(c)] = 1;
+      order.push_back(c);
+    }
+  }
+  TetMesh out;
+  TriMesh dec_all;
+  std::vector<Eigen::RowVector3d> V;
+  std::vector<Eigen::Matrix<int, 1, 4>> T;
+  std::vector<Eigen::RowVector3d> DV;
+  std::vector<Eigen::RowVector3i> DF;
+  for (int c : order) {
+    std::vector<int> map(std::size_t(surface.V.rows()), -1);
+    TriMesh part;
+    std::vector<Eigen::RowVector3d> pv;
+    std::vector<Eigen::RowVector3i> pf;
+    for (Eigen::Index f = 0; f < surface.F.rows(); ++f) {
+      if (label(surface.F(f, 0)) != c) continue;
+      Eigen::RowVector3i tri;
+      for (int k = 0; k < 3; ++k) {
+        const int v = surface.F(f, k);
+        if (map[std::size_t(v)] < 0) {
+          map[std::size_t(v)] = int(pv.size());
+          pv.push_back(surface.V.row(v));
+        }
+        tri(k) = map[std::size_t(v)];
+      }
+      pf.push_back(tri);
+    }
+    part.V.resize(Eigen::Index(pv.size()), 3);
+    for (std::size_t i = 0; i < pv.size(); ++i) part.V.row(Eigen::Index(i)) = pv[i];
+    part.F.resize(Eigen::Index(pf.size()), 3);
+    for (std::size_t i = 0; i < pf.size(); ++i) part.F.row(Eigen::Index(i)) = pf[i];
+    const Eigen::Index share = target_tets > 0 ? std::max<Eigen::Index>(20, target_tets * part.F.rows() / surface.F.rows()) : 0;
+    TriMesh dec;
+    const TetMesh t = tetrahedralize_to_size(part, share, options, &dec);
+    const int off = int(V.size()), doff = int(DV.size());
+    for (Eigen::Index i = 0; i < t.V.rows(); ++i) V.push_back(t.V.row(i));
+    for (Eigen::Index i = 0; i < t.T.rows(); ++i) T.push_back(t.T.row(i).array() + off);
+    for (Eigen::Index i = 0; i < dec.V.rows(); ++i) DV.push_back(dec.V.row(i));
+    for (Eigen::Index i = 0; i < dec.F.rows(); ++i) DF.push_back(dec.F.row(i).array() + doff);
+  }
+  out.V.resize(Eigen::Index(V.size()), 3);
+  for (std::size_t i = 0; i < V.size(); ++i) out.V.row(Eigen::Index(i)) = V[i];
+  out.T.resize(Eigen::Index(T.size()), 4);
+  for (std::size_t i = 0; i < T.size(); ++i) out.T.row(Eigen::Index(i)) = T[i];
+  if (decimated_surface) {
+    decimated_surface->V.resize(Eigen::Index(DV.size()), 3);
+    for (std::size_t i = 0; i < DV.size(); ++i) decimated_surface->V.row(Eigen::Index(i)) = DV[i];
+    decimated_surface->F.resize(Eigen::Index(DF.size()), 3);
+    for (std::size_t i = 0; i < DF.size(); ++i) decimated_surface->F.row(Eigen::Index(i)) = DF[i];
+  }
+  return out;
 }
 
 }  // namespace tbsp

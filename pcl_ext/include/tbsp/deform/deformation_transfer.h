@@ -15,6 +15,9 @@
 /// blend is C¹ in v_i (Wendland C² weights of smoothly varying barycentric coordinates), so
 /// the result has no per-tet kinks ("dents") of the nearest-tet transfer.
 /// A vertex with no tetrahedron within r uses its nearest tetrahedron (by barycenter) alone.
+/// A tet mesh of several vertex-connected parts (a template of overlapping closed bodies, or a
+/// shell of several surfaces): a vertex blends only the tets of the part its nearest tetrahedron
+/// belongs to, so parts do not drag each other along.
 ///
 /// Cost: precompute O(N · k) with k tets per ball (parallel over vertices, OpenMP); apply
 /// O(nnz(B)) (parallel over rows). Memory: nnz(B) · 12 bytes.

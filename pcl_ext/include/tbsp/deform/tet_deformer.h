@@ -176,6 +176,13 @@ public:
 
   /// Current positions of all working-mesh vertices.
   const Eigen::MatrixX3d& positions() const { return X_; }
+  /// \brief Linear response of working-mesh `vertices` to the vertex and point handles, with the
+  /// rotations held fixed: entry (i, h) is how far vertex i moves (the same along x, y and z) when
+  /// handle h's target moves by one unit. Exact for the linear solve of the next iterate(), so a
+  /// tracker can fit handle targets to constraints on any vertex by linear least squares
+  /// (performance capture, §9.2). Region-handle columns are zero. Factorizes if needed; one solve
+  /// with #handles right-hand sides. \throws InvalidInput for a vertex out of range.
+  Eigen::MatrixXd handleResponse(const std::vector<int>& vertices);
   /// Current positions of the input vertices only.
   Eigen::MatrixX3d inputPositions() const { return X_.topRows(n_input_vertices_); }
   /// E_nonrigid (eq. 7.5) of arbitrary positions of the working mesh.

@@ -39,4 +39,9 @@ private:
 /// points (deterministic): the typical sample spacing of a cloud.
 double median_spacing(const PointSearch& tree, int samples = 2000);
 
+/// Farthest-point sampling of `k` of the `candidates` (row indices of V), starting from the
+/// candidate nearest V's centroid: deterministic, spread evenly over the points. Returns fewer
+/// than k when the candidates run out (or only coincident ones are left). O(k · #candidates).
+std::vector<int> farthest_point_sample(const Eigen::MatrixX3d& V, const std::vector<int>& candidates, int k);
+
 }  // namespace tbsp

@@ -61,4 +61,13 @@ TetMesh tetrahedralize(const TriMesh& surface, const TetgenOptions& options = {}
 TetMesh tetrahedralize_to_size(const TriMesh& surface, Eigen::Index target_tets, const TetgenOptions& options = {},
                                TriMesh* decimated_surface = nullptr);
 
+/// \brief tetrahedralize_to_size on each connected component of the surface on its own, the
+/// results concatenated (vertex indices offset, components in the order of their first face).
+/// For templates modelled as overlapping closed parts (limbs pushed into a torso), which TetGen
+/// refuses as a whole because the parts intersect; each part becomes a volume of its own. The
+/// target is shared by the components' face counts (at least 20 tets each). Throws like
+/// tetrahedralize when a component itself is open, non-manifold or self-intersecting.
+TetMesh tetrahedralize_components(const TriMesh& surface, Eigen::Index target_tets, const TetgenOptions& options = {},
+                                  TriMesh* decimated_surface = nullptr);
+
 }  // namespace tbsp

@@ -1,0 +1,159 @@
+#pragma once
+/// \file performance_capture.h
+/// \brief Mesh-based performance capture from multi-view video (thesis §9.2, de Aguiar et al.
+/// 2008): a template of the performer, posed like the first frame, is tracked through a
+/// calibrated multi-view recording (images + silhouettes); the output is one mesh per frame with
+/// the template's connectivity.
+///
+/// Per frame (an analysis-by-synthesis loop on a tetrahedral version of the template, ch. 7):
+/// 1. **features** — SIFT (OpenCV) in every view, inside the silhouette's box; the previous
+///    frame's keypoints were lifted onto the previous mesh (the rasterizer's triangle id and
+///    barycentrics: a surface point each); matched to this frame's keypoints over time (ratio
+///    test, flow gate) and, against drift, to the first frame's lifted keypoints. Every match is a
+///    *ray constraint*: the surface point must lie on the camera ray through the matched pixel.
+///    Several views see each body part, so the rays of all views together fix it in 3D; there
+///    is no explicit cross-view matching (it would add ambiguity, not information).
+/// 2. **silhouette rims** — rim vertices of the control surface matched to the input contour
+///    (§6.3.1: along the contour normal, gradient orientation test) give ray constraints too.
+/// 3. **pose** — a smooth displacement field on the control surface that best satisfies all ray
+///    constraints (robust least squares in pixels, Huber reweighted, outliers dropped) moves the
+///    handle vertices; the TetDeformer (as-rigid-as-possible, warm-started from the last frame)
+///    moves the rest. Repeated `pose_rounds` times, re-linearized each round.
+/// 4. **handle optimization** (optional) — the thesis' black-box step: `key_handles` handles
+///    are moved by NLopt's BOBYQA to maximize the silhouette overlap, with E_nonrigid (eq. 7.5)
+///    and the handle distance as penalties.
+/// 5. **transfer** to the full-resolution template (DeformationTransfer, §7.3), then
+///    **SilhouetteRefinement** (§6.3) for detail the tetrahedral model cannot carry.
+/// Tracking failures (smallest per-view silhouette IoU below `failure_iou`) are reported per
+/// frame; a failed frame gets a second, silhouette-only pose pass, and the tracker goes on.
+///
+/// Units: pixels for image quantities, the cameras' world units for meshes. Errors:
+/// InvalidInput naming the frame, camera and fix (no cameras, wrong image/silhouette sizes, empty
+/// silhouettes, a template outside every view, bad options); Cancelled via the progress callback.
+/// Deterministic: no random choice (SIFT and the optimizer are deterministic; views run in
+/// parallel, each on its own data).
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "tbsp/core/progress.h"
+#include "tbsp/mesh/tet_mesh.h"
+#include "tbsp/mesh/tri_mesh.h"
+#include "tbsp/multiview/camera.h"
+
+namespace tbsp {
+
+/// Options of PerformanceCapture. Defaults are what the measurements in
+/// docs/performance_capture.md used; none is tuned per sequence.
+struct PerformanceCaptureOptions {
+  // control model
+  int tets = 5000;                 ///< tetrahedra of the control mesh (QEM + TetGen), >= 100; 0 = the template as is
+  int handles = 150;               ///< handle vertices on the control surface (farthest-point sampled), 4..5000
+  double transfer_radius = 0;      ///< DeformationTransfer radius, world units; 0 = automatic
+  // pose
+  int pose_rounds = 3;             ///< constraint → displacement → deformer rounds per frame, 1..20
+  int deformer_iterations = 4;     ///< TetDeformer iterations per round, 1..100
+  double smoothness = 0.2;         ///< weight of the displacement field's smoothness (per edge, in pixels²), > 0
+  double robust_px = 2.0;          ///< Huber scale of the ray residuals, pixels, > 0
+  double reject_px = 8.0;          ///< residuals above this (after the first solve) are outliers, pixels, > robust_px
+  // features
+  bool features = true;            ///< SIFT feature constraints (false: silhouettes only)
+  int max_features = 4000;         ///< SIFT keypoints per view and frame, 100..100000
+  double ratio = 0.8;              ///< Lowe's ratio test, (0, 1]
+  double max_flow_px = 60;         ///< largest image motion of a feature between frames, pixels, > 0
+  bool anchor_first_frame = true;  ///< also match against the first frame's features (limits drift)
+  // silhouettes
+  bool silhouettes = true;         ///< rim constraints in the pose step
+  double silhouette_weight = 0.5;  ///< weight of a rim constraint relative to a feature, (0, 10]; thesis 0.25–0.5
+  double search_px = 25;           ///< rim search along the contour normal, pixels, > 0
+  // handle optimization (thesis' black-box step)
+  bool optimize_handles = false;   ///< run it (see docs: measured, off by default)
+  int key_handles = 20;            ///< handles it moves, 1..100 (thesis: 15–25)
+  int max_evaluations = 200;       ///< objective evaluations per frame, >= 10
+  double optimize_image_scale = 0.25;  ///< silhouettes are compared at this scale, (0, 1]
+  // detail and failure handling
+  int refine_iterations = 5;       ///< SilhouetteRefinement iterations per frame (0 = none), 0..100
+  double failure_iou = 0.85;       ///< a frame whose smallest view IoU is below this is a tracking failure, [0, 1)
+
+  bool isValid(std::string* why = nullptr) const;
+};
+
+/// What happened in one frame. Times in seconds.
+struct CaptureFrameReport {
+  int frame = 0;
+  int keypoints = 0;                 ///< SIFT keypoints, all views
+  int temporal_matches = 0;          ///< matches to the previous frame's lifted keypoints
+  int anchor_matches = 0;            ///< matches to the first frame's lifted keypoints
+  int inliers = 0;                   ///< feature constraints kept by the robust solve (last round)
+  int rim_constraints = 0;           ///< last round
+  std::vector<double> iou;           ///< per view, of the output mesh
+  double iou_min = 0, iou_mean = 0;
+  double iou_pose = 0;               ///< mean IoU after the pose step (before optimization/refinement)
+  int evaluations = 0;               ///< handle optimization
+  bool failed = false;               ///< tracking failure detected (iou_min < failure_iou after the retry)
+  bool retried = false;              ///< the silhouette-only retry ran
+  double t_features = 0, t_match = 0, t_pose = 0, t_optimize = 0, t_transfer = 0, t_refine = 0, t_total = 0;
+};
+
+struct PerformanceCaptureReport {
+  Eigen::Index tet_vertices = 0, tets = 0, surface_vertices = 0, control_surface_vertices = 0;
+  int handles = 0;
+  bool per_component_tets = false;   ///< TetGen refused the whole template; each connected part was tetrahedralized on its own
+  bool shell_tets = false;           ///< TetGen refused even the parts; one tetrahedron per triangle instead
+  double t_setup = 0;
+  std::vector<CaptureFrameReport> frames;
+  int failed_frames = 0;
+};
+
+class PerformanceCapture {
+public:
+  using Ptr = std::shared_ptr<PerformanceCapture>;
+  using ConstPtr = std::shared_ptr<const PerformanceCapture>;
+  using Options = PerformanceCaptureOptions;
+
+  PerformanceCapture();
+  ~PerformanceCapture();
+  PerformanceCapture(const PerformanceCapture&) = delete;
+  PerformanceCapture& operator=(const PerformanceCapture&) = delete;
+
+  /// Throws InvalidInput naming the field when `o` is not valid. Restarts the tracking.
+  void setOptions(const PerformanceCaptureOptions& o);
+  const PerformanceCaptureOptions& options() const { return options_; }
+  void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
+  /// The calibrated cameras (all frames). Restarts the tracking.
+  void setCameras(std::vector<Camera> cameras);
+  /// The template, posed like the performer in the first frame that will be given (world
+  /// units of the cameras); a closed surface gives a volumetric control mesh. Restarts.
+  void setTemplate(const TriMesh& posed);
+  /// Same, with a given control tet mesh (same frame as `posed`).
+  void setTemplate(const TriMesh& posed, const TetMesh& tets);
+
+  /// Tracks one frame: `images` CV_8UC3 (BGR) or CV_8U per camera, `silhouettes` CV_8U (>= 128
+  /// foreground), both of the calibrated size. The first call registers the template to this
+  /// frame (silhouettes only); later calls track from the previous one. Frames are consecutive
+  /// in time (`frame` is only a label for reports and errors). `out` gets the mesh (template
+  /// connectivity); untouched on error.
+  void track(const std::vector<cv::Mat>& images, const std::vector<cv::Mat>& silhouettes, int frame, TriMesh& out);
+
+  const PerformanceCaptureReport& report() const { return report_; }
+  /// The control tet mesh in its current pose (after the last frame).
+  TetMesh controlMesh() const;
+
+private:
+  struct Impl;
+  void start();
+  PerformanceCaptureOptions options_;
+  ProgressCallback progress_;
+  std::vector<Camera> cameras_;
+  TriMesh template_;
+  TetMesh template_tets_;
+  bool tets_given_ = false;
+  bool started_ = false;
+  PerformanceCaptureReport report_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tbsp

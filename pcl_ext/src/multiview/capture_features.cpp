@@ -1,0 +1,126 @@
+#include "capture_features.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace tbsp::detail {
+
+ViewFeatures detect_features(const cv::Mat& image, const cv::Mat& silhouette, int max_features) {
+  ViewFeatures out;
+  cv::Mat mask = silhouette >= 128;
+  const cv::Rect box = cv::boundingRect(mask);
+  if (box.area() == 0) return out;
+  const int m = 8;
+  const cv::Rect roi = (box + cv::Point(-m, -m) + cv::Size(2 * m, 2 * m)) & cv::Rect(0, 0, image.cols, image.rows);
+  cv::Mat gray;
+  if (image.channels() == 3) cv::cvtColor(image(roi), gray, cv::COLOR_BGR2GRAY);
+  else gray = image(roi);
+  std::vector<cv::KeyPoint> kp;
+  const double ct = std::getenv("TBSP_PC_CT") ? std::atof(std::getenv("TBSP_PC_CT")) : 0.04;
+  cv::Ptr<cv::SIFT> sift = cv::SIFT::create(max_features, 3, ct);
+  sift->detectAndCompute(gray, mask(roi), kp, out.desc);
+  out.pixel.reserve(kp.size());
+  for (const cv::KeyPoint& k : kp) out.pixel.emplace_back(k.pt.x + roi.x, k.pt.y + roi.y);
+  return out;
+}
+
+LiftedFeatures lift_features(const ViewFeatures& f, const RenderBuffers& b, const std::vector<FeatureMatch>& inherit, const TriMesh* mesh,
+                             const Camera* cam, double inherit_px) {
+  LiftedFeatures out;
+  std::vector<int> rows;
+  std::vector<const FeatureMatch*> track(f.pixel.size(), nullptr);
+  const int r = std::getenv("TBSP_PC_MARGIN") ? std::atoi(std::getenv("TBSP_PC_MARGIN")) : 2;
+  if (mesh && cam)
+    for (const FeatureMatch& m : inherit)
+      if (m.keypoint >= 0 && std::size_t(m.keypoint) < track.size()) track[std::size_t(m.keypoint)] = &m;
+  auto at = [&](int x, int y) { return static_cast<std::size_t>(y) * b.width + x; };
+  for (std::size_t i = 0; i < f.pixel.size(); ++i) {
+    const int x = static_cast<int>(std::lround(f.pixel[i].x())), y = static_cast<int>(std::lround(f.pixel[i].y()));
+    if (x < r || y < r || x >= b.width - r || y >= b.height - r) continue;
+    const std::int32_t face = b.face[at(x, y)];
+    if (face < 0) continue;
+    const float d0 = b.depth[at(x, y)];
+    bool smooth = true;  // no depth discontinuity within 2 pixels
+    for (int dy = -r; dy <= r && smooth; dy += r)
+      for (int dx = -r; dx <= r && smooth; dx += r) {
+        const float d = b.depth[at(x + dx, y + dy)];
+        smooth = std::isfinite(d) && std::abs(d - d0) < 0.01f * d0;
+      }
+    if (!smooth) continue;
+    const FeatureMatch* t = track[i];
+    if (t && (cam->project(surface_point(*mesh, t->face, t->bary)) - f.pixel[i]).norm() <= inherit_px) {
+      out.face.push_back(t->face);  // the track keeps its surface point
+      out.bary.push_back(t->bary);
+    } else {
+      const float b1 = b.bary[2 * at(x, y)], b2 = b.bary[2 * at(x, y) + 1];
+      out.face.push_back(face);
+      out.bary.emplace_back(1.0 - b1 - b2, b1, b2);
+    }
+    rows.push_back(static_cast<int>(i));
+  }
+  out.desc.create(static_cast<int>(rows.size()), f.desc.cols, CV_32F);
+  for (std::size_t r = 0; r < rows.size(); ++r) f.desc.row(rows[r]).copyTo(out.desc.row(static_cast<int>(r)));
+  return out;
+}
+
+int match_features(const LiftedFeatures& from, const ViewFeatures& to, const TriMesh& mesh, const Camera& cam, double ratio,
+                   double max_flow_px, std::vector<FeatureMatch>& out) {
+  if (from.desc.rows < 1 || to.desc.rows < 2) return 0;
+  cv::BFMatcher matcher(cv::NORM_L2);
+  std::vector<std::vector<cv::DMatch>> knn;
+  matcher.knnMatch(from.desc, to.desc, knn, 2);
+  // best match per target keypoint (one-to-one)
+  std::vector<int> owner(to.pixel.size(), -1);
+  std::vector<float> best(to.pixel.size(), 0.f);
+  std::vector<Eigen::Vector2d> predicted(knn.size());
+  for (std::size_t i = 0; i < knn.size(); ++i) {
+    if (knn[i].size() < 2 || knn[i][0].distance > ratio * knn[i][1].distance) continue;
+    const int j = knn[i][0].trainIdx;
+    const Eigen::Vector3d X = surface_point(mesh, from.face[i], from.bary[i]);
+    if (!(cam.depth(X) > 0)) continue;
+    predicted[i] = cam.project(X);
+    if ((predicted[i] - to.pixel[std::size_t(j)]).norm() > max_flow_px) continue;
+    if (owner[std::size_t(j)] < 0 || knn[i][0].distance < best[std::size_t(j)]) {
+      owner[std::size_t(j)] = static_cast<int>(i);
+      best[std::size_t(j)] = knn[i][0].distance;
+    }
+  }
+  std::vector<std::size_t> js;
+  for (std::size_t j = 0; j < owner.size(); ++j)
+    if (owner[j] >= 0) js.push_back(j);
+  // local consistency of the image motion
+  std::vector<Eigen::Vector2d> flow(js.size());
+  for (std::size_t a = 0; a < js.size(); ++a) flow[a] = to.pixel[js[a]] - predicted[std::size_t(owner[js[a]])];
+  int n = 0;
+  std::vector<std::pair<double, std::size_t>> near;
+  std::vector<double> fx, fy;
+  for (std::size_t a = 0; a < js.size(); ++a) {
+    near.clear();
+    for (std::size_t c = 0; c < js.size(); ++c)
+      if (c != a) near.emplace_back((to.pixel[js[c]] - to.pixel[js[a]]).squaredNorm(), c);
+    const std::size_t k = std::min<std::size_t>(8, near.size());
+    if (k >= 3) {
+      std::partial_sort(near.begin(), near.begin() + long(k), near.end());
+      fx.clear();
+      fy.clear();
+      for (std::size_t q = 0; q < k; ++q) {
+        fx.push_back(flow[near[q].second].x());
+        fy.push_back(flow[near[q].second].y());
+      }
+      std::nth_element(fx.begin(), fx.begin() + long(k / 2), fx.end());
+      std::nth_element(fy.begin(), fy.begin() + long(k / 2), fy.end());
+      const Eigen::Vector2d med(fx[k / 2], fy[k / 2]);
+      if ((flow[a] - med).norm() > 3.0 + 0.25 * med.norm()) continue;
+    }
+    const std::size_t i = std::size_t(owner[js[a]]);
+    out.push_back({from.face[i], from.bary[i], to.pixel[js[a]], int(js[a])});
+    ++n;
+  }
+  return n;
+}
+
+}  // namespace tbsp::detail

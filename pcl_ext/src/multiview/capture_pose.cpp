@@ -1,0 +1,276 @@
+#include "capture_pose.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include <Eigen/Sparse>
+#include <nlopt.h>
+
+#include "tbsp/core/error.h"
+#include "tbsp/multiview/rasterizer.h"
+#include "tbsp/solve/sparse_cholesky.h"
+#include "silhouette_match.h"
+
+namespace tbsp::detail {
+
+namespace {
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+}  // namespace
+
+DisplacementResult solve_displacement(Eigen::Index n, const Eigen::MatrixX2i& edges, const std::vector<RayConstraint>& C,
+                                      const DisplacementOptions& o) {
+  DisplacementResult res;
+  res.d = Eigen::MatrixX3d::Zero(n, 3);
+  if (C.empty() || n == 0) return res;
+  std::vector<double> sizes;
+  sizes.reserve(C.size());
+  for (const auto& c : C) sizes.push_back(c.pixel_size);
+  const double sbar = median(sizes);
+  const double ref = 1.0 / (sbar * sbar);
+  using Trip = Eigen::Triplet<double>;
+  std::vector<Trip> base;
+  base.reserve(std::size_t(3 * n + 12 * edges.rows()));
+  for (Eigen::Index v = 0; v < n; ++v)
+    for (int c = 0; c < 3; ++c) base.emplace_back(int(3 * v + c), int(3 * v + c), o.prior * ref);
+  for (Eigen::Index e = 0; e < edges.rows(); ++e) {
+    const int a = edges(e, 0), b = edges(e, 1);
+    for (int c = 0; c < 3; ++c) {
+      base.emplace_back(3 * a + c, 3 * a + c, o.smoothness * ref);
+      base.emplace_back(3 * b + c, 3 * b + c, o.smoothness * ref);
+      base.emplace_back(3 * a + c, 3 * b + c, -o.smoothness * ref);
+      base.emplace_back(3 * b + c, 3 * a + c, -o.smoothness * ref);
+    }
+  }
+  std::vector<double> omega(C.size());
+  for (std::size_t i = 0; i < C.size(); ++i) omega[i] = C[i].weight;
+  std::vector<Eigen::Matrix3d> P(C.size());
+  for (std::size_t i = 0; i < C.size(); ++i) {
+    const Eigen::Vector3d r = C[i].dir.normalized();
+    P[i] = Eigen::Matrix3d::Identity() - r * r.transpose();
+  }
+  SparseCholesky chol;
+  std::vector<double> resid(C.size(), 0.0);
+  for (int round = 0; round <= o.reweights; ++round) {
+    std::vector<Trip> trips = base;
+    trips.reserve(base.size() + C.size() * 144);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(3 * n);
+    for (std::size_t i = 0; i < C.size(); ++i) {
+      const RayConstraint& c = C[i];
+      const double inv = omega[i] / (c.pixel_size * c.pixel_size);
+      const Eigen::Vector3d r0 = P[i] * (c.p - c.origin);
+      for (int a = 0; a < 4; ++a) {
+        if (c.v[std::size_t(a)] < 0) continue;
+        const int va = c.v[std::size_t(a)];
+        rhs.segment<3>(3 * va) -= inv * c.w[std::size_t(a)] * r0;
+        for (int b = 0; b < 4; ++b) {
+          if (c.v[std::size_t(b)] < 0) continue;
+          const int vb = c.v[std::size_t(b)];
+          const double s = inv * c.w[std::size_t(a)] * c.w[std::size_t(b)];
+          for (int r = 0; r < 3; ++r)
+            for (int q = 0; q < 3; ++q) trips.emplace_back(3 * va + r, 3 * vb + q, s * P[i](r, q));
+        }
+      }
+    }
+    const auto ta = std::chrono::steady_clock::now();
+    Eigen::SparseMatrix<double> A(3 * n, 3 * n);
+    A.setFromTriplets(trips.begin(), trips.end());  // explicit zeros kept: the pattern is the same every round
+    const auto tb = std::chrono::steady_clock::now();
+    chol.compute(A);
+    const auto tc = std::chrono::steady_clock::now();
+    const Eigen::VectorXd d = chol.solve(rhs);
+    if (std::getenv("TBSP_PC_DEBUG")) std::fprintf(stderr, "  n %ld nnz %ld trips %zu assemble %.3f factor %.3f solve %.3f %s\n", long(3*n), long(A.nonZeros()), trips.size(),
+      std::chrono::duration<double>(tb-ta).count(), std::chrono::duration<double>(tc-tb).count(), std::chrono::duration<double>(std::chrono::steady_clock::now()-tc).count(), chol.backendName().c_str());
+    for (Eigen::Index v = 0; v < n; ++v) res.d.row(v) = d.segment<3>(3 * v).transpose();
+    for (std::size_t i = 0; i < C.size(); ++i) {
+      const RayConstraint& c = C[i];
+      Eigen::Vector3d q = c.p;
+      for (int a = 0; a < 4; ++a)
+        if (c.v[std::size_t(a)] >= 0) q += c.w[std::size_t(a)] * res.d.row(c.v[std::size_t(a)]).transpose();
+      resid[i] = (P[i] * (q - c.origin)).norm() / c.pixel_size;
+    }
+    if (round == o.reweights) break;
+    for (std::size_t i = 0; i < C.size(); ++i) {
+      const double r = resid[i];
+      omega[i] = r > o.reject_px ? 0.0 : C[i].weight * (r <= o.robust_px ? 1.0 : o.robust_px / r);
+    }
+  }
+  std::vector<double> in;
+  for (std::size_t i = 0; i < C.size(); ++i) {
+    if (resid[i] > o.reject_px) continue;
+    in.push_back(resid[i]);
+    (C[i].feature ? res.feature_inliers : res.rim_inliers)++;
+  }
+  res.median_residual_px = median(in);
+  return res;
+}
+
+Eigen::MatrixXd handle_stiffness(const Eigen::MatrixXd& R, const Eigen::MatrixX2i& edges) {
+  Eigen::MatrixXd D(edges.rows(), R.cols());
+  for (Eigen::Index e = 0; e < edges.rows(); ++e) D.row(e) = R.row(edges(e, 0)) - R.row(edges(e, 1));
+  return D.transpose() * D;
+}
+
+Eigen::Matrix3d constraint_projector(const RayConstraint& c) {
+  if (c.plane_normal.squaredNorm() > 0) return c.plane_normal * c.plane_normal.transpose();
+  const Eigen::Vector3d d = c.dir.normalized();
+  return Eigen::Matrix3d::Identity() - d * d.transpose();
+}
+
+HandleSolveResult solve_handles(const Eigen::MatrixXd& R, const Eigen::MatrixXd& K, const std::vector<RayConstraint>& C,
+                                const DisplacementOptions& o) {
+  const Eigen::Index H = R.cols(), nc = Eigen::Index(C.size());
+  HandleSolveResult res;
+  res.dh = Eigen::MatrixX3d::Zero(H, 3);
+  if (nc == 0 || H == 0) return res;
+  // m_i = Σ_k w_k R.row(v_k): how the constrained point moves per unit handle move
+  Eigen::MatrixXd M(nc, H);
+  std::vector<double> sizes(C.size());
+  Eigen::MatrixX3d r0(nc, 3);  // P_i (p_i - o_i)
+  std::vector<Eigen::Matrix3d> P(C.size());
+  for (Eigen::Index i = 0; i < nc; ++i) {
+    const RayConstraint& c = C[std::size_t(i)];
+    M.row(i).setZero();
+    for (int a = 0; a < 4; ++a)
+      if (c.v[std::size_t(a)] >= 0) M.row(i) += c.w[std::size_t(a)] * R.row(c.v[std::size_t(a)]);
+    P[std::size_t(i)] = constraint_projector(c);
+    r0.row(i) = (P[std::size_t(i)] * (c.p - c.origin)).transpose();
+    sizes[std::size_t(i)] = c.pixel_size;
+  }
+  const double sbar = median(sizes);
+  std::vector<double> omega(C.size());
+  for (std::size_t i = 0; i < C.size(); ++i) omega[i] = C[i].weight;
+  std::vector<double> resid(C.size(), 0.0);
+  for (int round = 0; round <= o.reweights; ++round) {
+    Eigen::MatrixXd N = Eigen::MatrixXd::Zero(3 * H, 3 * H);
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(3 * H);
+    Eigen::VectorXd a(nc);
+    for (int c = 0; c < 3; ++c)
+      for (int q = c; q < 3; ++q) {
+        for (Eigen::Index i = 0; i < nc; ++i) {
+          const RayConstraint& k = C[std::size_t(i)];
+          a(i) = omega[std::size_t(i)] * P[std::size_t(i)](c, q) / (k.pixel_size * k.pixel_size);
+        }
+        const Eigen::MatrixXd blk = M.transpose() * (a.asDiagonal() * M);
+        N.block(c * H, q * H, H, H) = blk;
+        if (q != c) N.block(q * H, c * H, H, H) = blk.transpose();
+      }
+    for (int c = 0; c < 3; ++c) {
+      for (Eigen::Index i = 0; i < nc; ++i) {
+        const RayConstraint& k = C[std::size_t(i)];
+        a(i) = omega[std::size_t(i)] / (k.pixel_size * k.pixel_size);
+      }
+      // b_c = -Σ_i a_i m_i (P_i r0_i)_c  (P r0 = r0 since P is a projection)
+      b.segment(c * H, H) = -M.transpose() * (a.asDiagonal() * r0.col(c));
+    }
+    for (int c = 0; c < 3; ++c) N.block(c * H, c * H, H, H) += (o.smoothness / (sbar * sbar)) * K;
+    N.diagonal().array() += o.prior / (sbar * sbar);
+    const Eigen::VectorXd x = N.ldlt().solve(b);
+    for (int c = 0; c < 3; ++c) res.dh.col(c) = x.segment(c * H, H);
+    const Eigen::MatrixX3d move = M * res.dh;
+    for (Eigen::Index i = 0; i < nc; ++i)
+      resid[std::size_t(i)] = (P[std::size_t(i)] * (r0.row(i) + move.row(i)).transpose()).norm() / C[std::size_t(i)].pixel_size;
+    if (round == o.reweights) break;
+    for (std::size_t i = 0; i < C.size(); ++i) {
+      const double r = resid[i];
+      omega[i] = r > o.reject_px ? 0.0 : C[i].weight * (r <= o.robust_px ? 1.0 : o.robust_px / r);
+    }
+  }
+  std::vector<double> in;
+  for (std::size_t i = 0; i < C.size(); ++i) {
+    if (resid[i] > o.reject_px) continue;
+    in.push_back(resid[i]);
+    (C[i].feature ? res.feature_inliers : res.rim_inliers)++;
+  }
+  res.median_residual_px = median(in);
+  return res;
+}
+
+Camera scaled_camera(const Camera& c, double s) {
+  Eigen::Matrix3d K = c.K();
+  K.row(0) *= s;
+  K.row(1) *= s;
+  K(0, 2) += 0.5 * s - 0.5;  // pixel centres at integers: x' = s (x + 0.5) - 0.5
+  K(1, 2) += 0.5 * s - 0.5;
+  const int w = std::max(1, int(std::lround(c.width() * s))), h = std::max(1, int(std::lround(c.height() * s)));
+  return Camera(c.name(), w, h, K, c.R(), c.t(), c.distortion());
+}
+
+namespace {
+
+struct Problem {
+  TetDeformer* D;
+  const std::vector<int>* key;
+  const std::vector<Eigen::Vector3d>* targets;
+  const HandleOptimization* o;
+  std::vector<Eigen::Matrix3d> R0;
+  Rasterizer rast;
+  std::vector<RenderBuffers> buf;
+  TriMesh surf;
+  int evaluations = 0;
+  double last_overlap = 0;
+
+  double overlap(const Eigen::MatrixX3d& X) {
+    surf.V = X;
+    rast.renderViews(surf, o->cameras, buf);
+    double iou = 0;
+    for (std::size_t k = 0; k < buf.size(); ++k) iou += silhouette_overlap(buf[k].mask, o->silhouettes[k]).iou;
+    return iou / double(buf.size());
+  }
+  // Sets the offsets, restores the rotations, one deformer iteration.
+  Eigen::MatrixX3d apply(const double* x) {
+    for (std::size_t k = 0; k < key->size(); ++k)
+      D->setHandleTarget((*key)[k], (*targets)[k] + Eigen::Vector3d(x[3 * k], x[3 * k + 1], x[3 * k + 2]));
+    D->setRotations(R0);
+    D->iterate();
+    return D->positions();
+  }
+  double value(const double* x) {
+    ++evaluations;
+    const Eigen::MatrixX3d X = apply(x);
+    last_overlap = overlap(X);
+    double dist = 0;
+    for (std::size_t i = 0; i < 3 * key->size(); ++i) dist += (x[i] / o->step) * (x[i] / o->step);
+    return (1.0 - last_overlap) + o->nonrigid_weight * D->nonrigidEnergy(X) + o->distance_weight * 1e-3 * dist;
+  }
+};
+
+double objective(unsigned, const double* x, double*, void* data) { return static_cast<Problem*>(data)->value(x); }
+
+}  // namespace
+
+int optimize_handles(TetDeformer& D, const std::vector<int>& key, const std::vector<Eigen::Vector3d>& targets, const HandleOptimization& o,
+                     double& overlap_before, double& overlap_after) {
+  RasterOptions ro;
+  ro.barycentrics = false;
+  Problem pb{&D, &key, &targets, &o, D.rotations(), Rasterizer(ro), {}, {}, 0, 0};
+  pb.surf.F = o.surface;
+  const unsigned dim = unsigned(3 * key.size());
+  std::vector<double> x(dim, 0.0), lo(dim, -3 * o.step), hi(dim, 3 * o.step);
+  const double f0 = pb.value(x.data());
+  overlap_before = pb.last_overlap;
+  nlopt_opt opt = nlopt_create(NLOPT_LN_BOBYQA, dim);
+  if (!opt) throw Error("[tbsp::PerformanceCapture] NLopt could not create the BOBYQA optimizer");
+  nlopt_set_min_objective(opt, objective, &pb);
+  nlopt_set_lower_bounds(opt, lo.data());
+  nlopt_set_upper_bounds(opt, hi.data());
+  nlopt_set_initial_step1(opt, o.step);
+  nlopt_set_xtol_abs1(opt, 1e-3 * o.step);
+  nlopt_set_maxeval(opt, o.max_evaluations);
+  double fmin = f0;
+  std::vector<double> best = x;
+  const nlopt_result r = nlopt_optimize(opt, best.data(), &fmin);
+  nlopt_destroy(opt);
+  if (r < 0 || !(fmin < f0)) std::fill(best.begin(), best.end(), 0.0);  // failed or no gain: keep the start
+  pb.apply(best.data());
+  overlap_after = pb.overlap(D.positions());
+  return pb.evaluations;
+}
+
+}  // namespace tbsp::detail

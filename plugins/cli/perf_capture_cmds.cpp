@@ -1,0 +1,206 @@
+// `tbsp capture`: performance capture from a multi-view studio (thesis §9.2) through
+// tbsp::PerformanceCapture: a mesh per frame, a report and PNG overlays (docs/performance_capture.md).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
+
+#include <opencv2/imgproc.hpp>
+
+#include "command.h"
+#include "progress_bar.h"
+#include "studio_frames.h"
+#include "tbsp/core/error.h"
+#include "tbsp/core/timer.h"
+#include "tbsp/io/atomic_file.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/io/studio.h"
+#include "tbsp/multiview/performance_capture.h"
+#include "tbsp/multiview/rasterizer.h"
+
+namespace fs = std::filesystem;
+
+namespace tbsp::cli {
+
+namespace {
+
+struct CaptureArgs {
+  std::string studio, mesh, out, frames;
+  PerformanceCaptureOptions o;
+  int every = 1, overlays = 4;
+  bool no_features = false, no_meshes = false, quiet = false;
+};
+
+void add_capture(CLI::App& app, CaptureArgs& a, CLI::App*& sub) {
+  sub = app.add_subcommand("capture", "track a template through a multi-view studio recording (thesis §9.2, docs/performance_capture.md)");
+  sub->add_option("studio", a.studio, "studio.yaml (or its folder) with images and silhouettes for every camera")->required();
+  sub->add_option("--template", a.mesh, "template surface mesh, posed like the performer in the first frame, in the studio's units")->required();
+  sub->add_option("--out", a.out, "output folder: mesh_FFFF.ply, capture_report.json, overlay_FFFF.png")->required();
+  sub->add_option("--frames", a.frames, "frames a:b (inclusive) or one frame; default all");
+  sub->add_option("--every", a.every, "write every n-th mesh (default 1; every frame is still tracked)")->check(CLI::PositiveNumber);
+  sub->add_option("--tets", a.o.tets, "tetrahedra of the control mesh (default 5000; 0 = the template as is)");
+  sub->add_option("--handles", a.o.handles, "handle vertices on the control surface (default 150)");
+  sub->add_option("--rounds", a.o.pose_rounds, "pose rounds per frame (default 3)");
+  sub->add_flag("--no-features", a.no_features, "silhouettes only (no SIFT feature tracking)");
+  sub->add_flag("--optimize-handles", a.o.optimize_handles, "the thesis' black-box handle optimization (NLopt BOBYQA) after the pose step");
+  sub->add_option("--refine-iterations", a.o.refine_iterations, "silhouette refinement iterations per frame (default 5; 0 = none)");
+  sub->add_option("--failure-iou", a.o.failure_iou, "a frame whose worst view IoU is below this is reported as a tracking failure (default 0.85)");
+  sub->add_option("--overlays", a.overlays, "frames with a PNG overlay of the mesh on the camera images (default 4; 0 = none)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_flag("--no-meshes", a.no_meshes, "track and report only, write no mesh files");
+  sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
+}
+
+// All views of one frame in a grid, each cropped to the performer: where mesh and silhouette
+// agree the camera image is tinted green; mesh outside the silhouette is blue, silhouette the
+// mesh misses is red.
+cv::Mat overlay_grid(const TriMesh& mesh, const std::vector<Camera>& cams, const StudioFrame& fr) {
+  RasterOptions ro;
+  ro.barycentrics = false;
+  const std::vector<RenderBuffers> buf = Rasterizer(ro).renderViews(mesh, cams);
+  const int n = int(cams.size()), cols = std::min(n, 4), rows = (n + cols - 1) / cols;
+  const int w = 300, h = 400;
+  cv::Mat grid(rows * h, cols * w, CV_8UC3, cv::Scalar(40, 40, 40));
+  for (int k = 0; k < n; ++k) {
+    const Camera& cam = cams[std::size_t(k)];
+    cv::Mat img;
+    const cv::Mat& src = fr.images[std::size_t(k)];
+    if (src.empty()) img = cv::Mat(cam.height(), cam.width(), CV_8UC3, cv::Scalar(0, 0, 0));
+    else if (src.channels() == 1) cv::cvtColor(src, img, cv::COLOR_GRAY2BGR);
+    else img = src.clone();
+    const RenderBuffers& b = buf[std::size_t(k)];
+    const cv::Mat& sil = fr.silhouettes[std::size_t(k)];
+    cv::Rect box;
+    for (int y = 0; y < img.rows; ++y)
+      for (int x = 0; x < img.cols; ++x) {
+        const bool m = b.mask[std::size_t(y) * b.width + x] != 0, s = sil.at<uchar>(y, x) >= 128;
+        if (!m && !s) continue;
+        box |= cv::Rect(x, y, 1, 1);
+        cv::Vec3b& p = img.at<cv::Vec3b>(y, x);
+        if (m && s) p = cv::Vec3b(uchar(p[0] * 0.7), uchar(p[1] * 0.7 + 60), uchar(p[2] * 0.7));
+        else p = m ? cv::Vec3b(255, 80, 0) : cv::Vec3b(0, 0, 255);
+      }
+    if (box.area() == 0) box = cv::Rect(0, 0, img.cols, img.rows);
+    // crop with the panel's aspect ratio around the performer, 8 % margin
+    const double bw = box.width * 1.16, bh = box.height * 1.16, scale = std::max(bw / w, bh / h);
+    const cv::Point2d c(box.x + box.width / 2.0, box.y + box.height / 2.0);
+    const cv::Rect crop = cv::Rect(int(c.x - scale * w / 2), int(c.y - scale * h / 2), int(scale * w), int(scale * h)) & cv::Rect(0, 0, img.cols, img.rows);
+    cv::Mat panel(h, w, CV_8UC3, cv::Scalar(40, 40, 40)), small;
+    const double f = std::min(double(w) / crop.width, double(h) / crop.height);
+    cv::resize(img(crop), small, cv::Size(std::max(1, int(crop.width * f)), std::max(1, int(crop.height * f))), 0, 0, cv::INTER_AREA);
+    small.copyTo(panel(cv::Rect((w - small.cols) / 2, (h - small.rows) / 2, small.cols, small.rows)));
+    cv::putText(panel, cam.name(), cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1);
+    panel.copyTo(grid(cv::Rect((k % cols) * w, (k / cols) * h, w, h)));
+  }
+  return grid;
+}
+
+nlohmann::json frame_json(const CaptureFrameReport& f) {
+  return {{"frame", f.frame},
+          {"iou", f.iou},
+          {"iou_min", f.iou_min},
+          {"iou_mean", f.iou_mean},
+          {"iou_pose", f.iou_pose},
+          {"failed", f.failed},
+          {"retried", f.retried},
+          {"keypoints", f.keypoints},
+          {"temporal_matches", f.temporal_matches},
+          {"anchor_matches", f.anchor_matches},
+          {"feature_inliers", f.inliers},
+          {"rim_constraints", f.rim_constraints},
+          {"optimizer_evaluations", f.evaluations},
+          {"seconds", {{"features", f.t_features}, {"match", f.t_match}, {"pose", f.t_pose}, {"optimize", f.t_optimize},
+                       {"transfer", f.t_transfer}, {"refine", f.t_refine}, {"total", f.t_total}}}};
+}
+
+int cmd_capture(const CaptureArgs& a) {
+  const Studio st = read_studio(a.studio);
+  const auto [first, last] = parse_frames(a.frames, st);
+  for (const auto& c : st.cameras) {
+    if (c.silhouettes.empty())
+      throw InvalidInput("camera '" + c.camera.name() + "' of " + a.studio + " has no silhouettes: performance capture needs them for every camera");
+    if (!a.no_features && c.images.empty() && c.video.empty())
+      throw InvalidInput("camera '" + c.camera.name() + "' of " + a.studio + " has no images: feature tracking needs them (or run with --no-features)");
+  }
+  const TriMesh tmpl = read_mesh(a.mesh);
+  std::error_code ec;
+  fs::create_directories(a.out, ec);
+  if (ec || !fs::is_directory(a.out)) throw FileError("'" + a.out + "': cannot create the output folder (" + ec.message() + ")");
+  PerformanceCaptureOptions o = a.o;
+  o.features = !a.no_features;
+  PerformanceCapture pc;
+  pc.setOptions(o);
+  const std::vector<Camera> cams = st.cameraList();
+  pc.setCameras(cams);
+  pc.setTemplate(tmpl);
+  const int n = last - first + 1;
+  std::vector<int> overlay_frames;
+  for (int k = 0; k < a.overlays && n > 0; ++k)
+    overlay_frames.push_back(first + (a.overlays == 1 ? 0 : int(std::lround(double(k) * (n - 1) / (a.overlays - 1)))));
+  overlay_frames.erase(std::unique(overlay_frames.begin(), overlay_frames.end()), overlay_frames.end());
+  const auto t0 = Clock::now();
+  int written = 0, done = 0;
+  auto write_report = [&](const std::string& error) {
+    const auto& r = pc.report();
+    nlohmann::json frames = nlohmann::json::array();
+    double worst = 1, mean = 0;
+    for (const auto& f : r.frames) {
+      frames.push_back(frame_json(f));
+      worst = std::min(worst, f.iou_min);
+      mean += f.iou_mean / double(r.frames.size());
+    }
+    nlohmann::json rep = {{"studio", a.studio},
+                          {"template", a.mesh},
+                          {"frames", done},
+                          {"meshes_written", written},
+                          {"failed_frames", r.failed_frames},
+                          {"worst_view_iou", r.frames.empty() ? 0.0 : worst},
+                          {"mean_iou", mean},
+                          {"control_mesh",
+                           {{"tets", r.tets}, {"tet_vertices", r.tet_vertices}, {"surface_vertices", r.control_surface_vertices},
+                            {"handles", r.handles}, {"shell_tets", r.shell_tets}}},
+                          {"seconds_setup", r.t_setup},
+                          {"seconds", seconds_since(t0)},
+                          {"per_frame", frames}};
+    if (!error.empty()) rep["error"] = error;
+    write_text_file_atomic((fs::path(a.out) / "capture_report.json").string(), rep.dump(1) + "\n");
+  };
+  try {
+    for_each_frame(st, first, last, true, a.quiet, [&](const StudioFrame& fr, const ProgressCallback& progress, ProgressBar&) {
+      pc.setProgressCallback(progress);
+      TriMesh m;
+      pc.track(fr.images, fr.silhouettes, fr.frame, m);
+      ++done;
+      char name[32];
+      if (!a.no_meshes && (fr.frame - first) % a.every == 0) {
+        std::snprintf(name, sizeof name, "mesh_%04d.ply", fr.frame);
+        write_mesh((fs::path(a.out) / name).string(), m);
+        ++written;
+      }
+      if (std::binary_search(overlay_frames.begin(), overlay_frames.end(), fr.frame)) {
+        std::snprintf(name, sizeof name, "overlay_%04d.png", fr.frame);
+        write_png((fs::path(a.out) / name).string(), overlay_grid(m, cams, fr));
+      }
+    });
+  } catch (const Error& e) {
+    write_report(e.what());  // what was tracked so far stays usable
+    throw;
+  }
+  write_report("");
+  const auto& r = pc.report();
+  if (!a.quiet) {
+    double worst = 1;
+    for (const auto& f : r.frames) worst = std::min(worst, f.iou_min);
+    std::cout << "capture: " << done << " frames, worst view IoU " << worst << ", " << r.failed_frames << " tracking failure(s), "
+              << seconds_since(t0) / std::max(1, done) << " s per frame; " << written << " meshes in " << a.out << "\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_perf_capture_commands(CLI::App& app, CommandTable& table) { register_command<CaptureArgs>(app, table, add_capture, cmd_capture); }
+
+}  // namespace tbsp::cli

@@ -1,0 +1,28 @@
+#pragma once
+// Helpers of the studio commands (stereo, refine-*, capture): frame ranges, streaming with a
+// progress bar, atomic PNG writes.
+#include <functional>
+#include <string>
+#include <utility>
+
+#include <opencv2/core.hpp>
+
+#include "progress_bar.h"
+#include "tbsp/core/progress.h"
+#include "tbsp/io/studio.h"
+
+namespace tbsp::cli {
+
+/// "--frames a:b" or "a" (the studio's frame numbers, inclusive); empty = all. InvalidInput when malformed or outside the studio.
+std::pair<int, int> parse_frames(const std::string& s, const Studio& st);
+
+// Streams frames first..last of a studio with a progress bar over all of them: `run(frame,
+// progress)` gets each frame and a callback mapping its own [0, 1] into the frame's share.
+// Returns the number of frames run.
+int for_each_frame(const Studio& st, int first, int last, bool silhouettes, bool quiet,
+                   const std::function<void(const StudioFrame&, const ProgressCallback&, ProgressBar&)>& run);
+
+/// Writes an image atomically (temporary file + rename); PNG by the path's extension.
+void write_png(const std::string& path, const cv::Mat& m);
+
+}  // namespace tbsp::cli
