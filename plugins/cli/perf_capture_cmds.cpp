@@ -110,7 +110,7 @@ nlohmann::json frame_json(const CaptureFrameReport& f) {
           {"anchor_matches", f.anchor_matches},
           {"feature_inliers", f.inliers},
           {"rim_constraints", f.rim_constraints},
-          {"optimizer_evaluations", f.evaluations},
+          {"optimizer", {{"evaluations", f.evaluations}, {"iou_before", f.opt_iou_before}, {"iou_after", f.opt_iou_after}}},
           {"seconds", {{"features", f.t_features}, {"match", f.t_match}, {"pose", f.t_pose}, {"optimize", f.t_optimize},
                        {"transfer", f.t_transfer}, {"refine", f.t_refine}, {"total", f.t_total}}}};
 }

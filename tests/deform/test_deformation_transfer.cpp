@@ -64,3 +64,25 @@ TEST(DeformationTransfer, BadInputGivesClearErrors) {
   dt.precompute(t, samples());
   EXPECT_THROW(dt.apply(Eigen::MatrixX3d::Zero(3, 3)), InvalidInput);
 }
+
+TEST(DeformationTransfer, PartsDoNotDragEachOther) {
+  // Two separate tetrahedralized boxes 2 cm apart, well within the blending radius: moving one
+  // must not move the surface points of the other.
+  TetMesh a = tetrahedralize(make_box(2, 2, 2, 0.2, 0.2, 0.2)), b = a;
+  b.V.rowwise() += Eigen::RowVector3d(0.22, 0, 0);
+  TetMesh both;
+  both.V.resize(a.V.rows() + b.V.rows(), 3);
+  both.V << a.V, b.V;
+  both.T.resize(a.T.rows() + b.T.rows(), 4);
+  both.T << a.T, (b.T.array() + int(a.V.rows())).matrix();
+  // hires points: on the facing sides of the two boxes
+  Eigen::MatrixX3d P(2, 3);
+  P << 0.2, 0.1, 0.1, 0.22, 0.1, 0.1;
+  DeformationTransfer dt;
+  dt.precompute(both, P, 0.3);  // the radius covers both boxes
+  Eigen::MatrixX3d X = both.V;
+  X.bottomRows(b.V.rows()).rowwise() += Eigen::RowVector3d(0, 0.5, 0);  // move b up
+  const Eigen::MatrixX3d Q = dt.apply(X);
+  EXPECT_NEAR((Q.row(0) - P.row(0)).norm(), 0.0, 1e-9);                         // on a: stays
+  EXPECT_NEAR((Q.row(1) - P.row(1) - Eigen::RowVector3d(0, 0.5, 0)).norm(), 0.0, 1e-9);  // on b: moves with b
+}

@@ -366,3 +366,36 @@ TEST_F(Bar, Fig83CasesBeatTheLinearLaplacian) {
     }
   }
 }
+
+TEST(TetDeformer, HandleResponseIsTheLinearStepExactly) {
+  // handleResponse predicts, per unit move of a handle, how every vertex moves in the next
+  // iteration's linear solve (rotations fixed): compare with an actual iteration.
+  const TetMesh bar = test::make_bar_tets();
+  TetDeformer d;
+  d.setMesh(bar);
+  const std::vector<int> left = test::vertices_x(bar.V, 0.0, false), right = test::vertices_x(bar.V, 1.0, true);
+  std::vector<int> handles = {left[0], left[1], left[2], right[0], right[1], right[2]};
+  for (int v : handles) d.addVertexHandle(v, bar.V.row(v).transpose());
+  std::vector<int> all(std::size_t(bar.V.rows()));
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = int(i);
+  const Eigen::MatrixXd R = d.handleResponse(all);
+  ASSERT_EQ(R.rows(), bar.V.rows());
+  ASSERT_EQ(R.cols(), 6);
+  for (std::size_t h = 0; h < handles.size(); ++h) EXPECT_DOUBLE_EQ(R(handles[h], Eigen::Index(h)), 1.0);  // a handle moves itself
+  d.iterate();
+  const Eigen::MatrixX3d X0 = d.positions();
+  const auto R0 = d.rotations();
+  const Eigen::Vector3d move(0.0, 0.05, -0.02);
+  d.setHandleTarget(4, bar.V.row(handles[4]).transpose() + move);
+  d.setRotations(R0);
+  d.iterate();
+  const Eigen::MatrixX3d X1 = d.positions();
+  double worst = 0, largest = 0;
+  for (Eigen::Index v = 0; v < bar.V.rows(); ++v) {
+    worst = std::max(worst, (X1.row(v) - X0.row(v) - R(v, 4) * move.transpose()).norm());
+    largest = std::max(largest, (X1.row(v) - X0.row(v)).norm());
+  }
+  EXPECT_LT(worst, 1e-12);
+  EXPECT_GT(largest, 0.05);  // the prediction is not trivially zero
+  EXPECT_THROW(d.handleResponse({int(bar.V.rows())}), InvalidInput);
+}

@@ -1,19 +1,20 @@
 // PerformanceCapture (thesis §9.2) against ground truth: the synthetic studio's performer (a
-// humanoid with a skirt and a solid texture), rendered into 8 calibrated views; the template is
-// the rest pose, tracked through the sequence from images and silhouettes alone.
+// humanoid with a skirt, parts modelled as overlapping closed bodies, a solid texture), rendered
+// into 8 calibrated views; the template is the rest pose, tracked through the sequence from the
+// images and silhouettes alone and compared with the ground-truth mesh of every frame.
+// The 60-frame, 1004 x 1004 acceptance run is `bench_capture_perf --capture-frames 60`
+// (docs/performance_capture.md); this test runs 30 frames at 600 x 600 to stay fast.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <string>
 
 #include "test_util.h"
 #include "tbsp/core/error.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/studio.h"
-#include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/multiview/performance_capture.h"
 #include "tbsp/plugins/synth_studio.h"
 
@@ -21,176 +22,161 @@ using namespace tbsp;
 
 namespace {
 
-int env_int(const char* name, int def) {
-  const char* v = std::getenv(name);
-  return v ? std::atoi(v) : def;
-}
-
-struct CaptureRun {
-  std::vector<double> err;  // mean vertex error / diagonal, per frame
-  std::vector<double> iou_min;
-  PerformanceCaptureReport report;
+struct Sequence {
+  Studio studio;
+  TriMesh rest;
+  double diag = 0;
 };
 
-CaptureRun run_capture(const std::string& name, int frames, int size, const PerformanceCaptureOptions& o) {
+Sequence make_sequence(const std::string& name, int frames, int size) {
   const auto dir = test::temp_dir(name);
   synth::StudioOptions so;
   so.frames = frames;
   so.width = so.height = size;
   so.markers = 4;
   synth::write_synthetic_studio(dir.string(), so);
-  const Studio studio = read_studio((dir / "studio.yaml").string());
-  const TriMesh rest = read_mesh((dir / "template.ply").string());
-  const double diag = (rest.V.colwise().maxCoeff() - rest.V.colwise().minCoeff()).norm();
-  {
-    const TriMesh gt0 = read_mesh(studio.groundTruthPath(studio.first_frame));
-    std::printf("template vs frame 0: %.3f %% of the diagonal\n", 100 * (rest.V - gt0.V).rowwise().norm().mean() / diag);
-  }
-  PerformanceCapture pc;
-  pc.setOptions(o);
-  pc.setCameras(studio.cameraList());
-  pc.setTemplate(rest);
-  StudioFrameStream stream(studio, {});
+  Sequence s;
+  s.studio = read_studio((dir / "studio.yaml").string());
+  s.rest = read_mesh((dir / "template.ply").string());
+  s.diag = (s.rest.V.colwise().maxCoeff() - s.rest.V.colwise().minCoeff()).norm();
+  return s;
+}
+
+StudioFrame first_frame(const Studio& st) {
+  StudioFrameStream stream(st, {});
   StudioFrame f;
-  CaptureRun run;
-  while (stream.next(f)) {
-    TriMesh m;
-    pc.track(f.images, f.silhouettes, f.frame, m);
-    const TriMesh gt = read_mesh(studio.groundTruthPath(f.frame));
-    run.err.push_back((m.V - gt.V).rowwise().norm().mean() / diag);
-    if (const char* od = std::getenv("TBSP_PC_OUT")) {
-      write_mesh(std::string(od) + "/pc_" + std::to_string(f.frame) + ".ply", m);
-      std::FILE* fp = std::fopen((std::string(od) + "/err_" + std::to_string(f.frame) + ".txt").c_str(), "w");
-      for (Eigen::Index v = 0; v < m.V.rows(); ++v) std::fprintf(fp, "%g\n", 100 * (m.V.row(v) - gt.V.row(v)).norm() / diag);
-      std::fclose(fp);
-    }
-    if (std::getenv("TBSP_PC_PARTS")) {
-      static const synth::Humanoid h = synth::make_humanoid(so.detail, so.folds);
-      double e[7] = {0}, c[7] = {0};
-      const Eigen::VectorXd d = (m.V - gt.V).rowwise().norm();
-      for (Eigen::Index v = 0; v < d.size(); ++v) { e[h.part[std::size_t(v)]] += d(v); c[h.part[std::size_t(v)]] += 1; }
-      std::printf("  parts (torso head larm rarm lleg rleg skirt) %%:");
-      for (int k = 0; k < 7; ++k) std::printf(" %.2f", 100 * e[k] / std::max(1.0, c[k]) / diag);
-      if (std::FILE* fp = std::fopen(("/tmp/pcdump/matches_" + std::to_string(f.frame) + ".txt").c_str(), "r")) {
-        const auto cams = studio.cameraList();
-        int cam, face; double b0, b1, b2, x, y; std::vector<double> res, res_prev, res_ours;
-        const TriMesh gtp = f.frame > 0 ? read_mesh(studio.groundTruthPath(f.frame - 1)) : gt;
-        while (std::fscanf(fp, "%d %d %lf %lf %lf %lf %lf", &cam, &face, &b0, &b1, &b2, &x, &y) == 7) {
-          const Eigen::Vector3d P = b0 * gt.V.row(gt.F(face, 0)).transpose() + b1 * gt.V.row(gt.F(face, 1)).transpose() + b2 * gt.V.row(gt.F(face, 2)).transpose();
-          res.push_back((cams[std::size_t(cam)].project(P) - Eigen::Vector2d(x, y)).norm());
-          const Eigen::Vector3d Q = b0 * gtp.V.row(gt.F(face, 0)).transpose() + b1 * gtp.V.row(gt.F(face, 1)).transpose() + b2 * gtp.V.row(gt.F(face, 2)).transpose();
-          res_prev.push_back((cams[std::size_t(cam)].project(Q) - Eigen::Vector2d(x, y)).norm());
-          const Eigen::Vector3d O = b0 * m.V.row(gt.F(face, 0)).transpose() + b1 * m.V.row(gt.F(face, 1)).transpose() + b2 * m.V.row(gt.F(face, 2)).transpose();
-          res_ours.push_back((cams[std::size_t(cam)].project(O) - Eigen::Vector2d(x, y)).norm());
-        }
-        std::fclose(fp);
-        auto med = [](std::vector<double> v) { if (v.empty()) return 0.0; std::sort(v.begin(), v.end()); return v[v.size() / 2]; };
-        auto frac = [](const std::vector<double>& v, double t) { double c = 0; for (double r : v) c += r < t; return v.empty() ? 0 : c / double(v.size()); };
-        std::printf("  feature residual: GT median %.2f px, <2px %.2f, <5px %.2f (GT previous frame median %.2f); ours median %.2f, <2px %.2f\n", med(res), frac(res, 2), frac(res, 5), med(res_prev), med(res_ours), frac(res_ours, 2));
-      }
-      {
-        const TetMesh cm = pc.controlMesh();
-        const TriMesh cs = tet_boundary_mesh(cm);
-        std::printf("  full-to-control %.3f %% gt-to-control %.3f %%", 100 * point_mesh_distances(cs.V, cs.F, m.V).mean() / diag,
-                    100 * point_mesh_distances(cs.V, cs.F, gt.V).mean() / diag);
-      }
-      if (o.tets == 0) {
-        const TetMesh cm = pc.controlMesh();
-        std::printf("  control-mesh vertex error %.3f %%", 100 * (cm.V.topRows(gt.V.rows()) - gt.V).rowwise().norm().mean() / diag);
-      }
-      std::printf("  surface dist %.3f %%\n", 100 * point_mesh_distances(gt.V, gt.F, m.V).mean() / diag);
-    }
-    const auto& fr = pc.report().frames.back();
-    run.iou_min.push_back(fr.iou_min);
-    std::printf("frame %3d  err %.3f %%  iou min %.4f mean %.4f pose %.4f  kp %d  temporal %d anchor %d inliers %d rims %d  "
-                "t %.2f s (sift %.2f match %.2f pose %.2f opt %.2f refine %.2f)%s\n",
-                f.frame, 100 * run.err.back(), fr.iou_min, fr.iou_mean, fr.iou_pose, fr.keypoints, fr.temporal_matches, fr.anchor_matches,
-                fr.inliers, fr.rim_constraints, fr.t_total, fr.t_features, fr.t_match, fr.t_pose, fr.t_optimize, fr.t_refine,
-                fr.failed ? "  FAILED" : "");
-  }
-  run.report = pc.report();
-  std::printf("control: %ld tets, %ld vertices, %ld on the surface, %d handles, shell %d per-component %d; template %ld vertices; setup %.2f s\n", long(run.report.tets),
-              long(run.report.tet_vertices), long(run.report.control_surface_vertices), run.report.handles, int(run.report.shell_tets), int(run.report.per_component_tets),
-              long(run.report.surface_vertices), run.report.t_setup);
-  return run;
+  stream.next(f);
+  return f;
 }
 
 }  // namespace
 
-TEST(PerformanceCapture, TracksTheSyntheticPerformer) {
-  PerformanceCaptureOptions o;
-  o.optimize_handles = env_int("TBSP_PC_OPT", 0) != 0;
-  o.features = env_int("TBSP_PC_FEATURES", 1) != 0;
-  o.refine_iterations = env_int("TBSP_PC_REFINE", o.refine_iterations);
-  o.handles = env_int("TBSP_PC_HANDLES", o.handles);
-  o.tets = env_int("TBSP_PC_TETS", o.tets);
-  o.pose_rounds = env_int("TBSP_PC_ROUNDS", o.pose_rounds);
-  o.deformer_iterations = env_int("TBSP_PC_ITERS", o.deformer_iterations);
-  if (const char* v = std::getenv("TBSP_PC_SMOOTH")) o.smoothness = std::atof(v);
-  if (const char* v = std::getenv("TBSP_PC_SILW")) o.silhouette_weight = std::atof(v);
-  if (const char* v = std::getenv("TBSP_PC_REJECT")) o.reject_px = std::atof(v);
-  if (const char* v = std::getenv("TBSP_PC_ROBUST")) o.robust_px = std::atof(v);
-  const CaptureRun r = run_capture("perf_capture", env_int("TBSP_PC_FRAMES", 20), env_int("TBSP_PC_SIZE", 600), o);
-  ASSERT_FALSE(r.err.empty());
+TEST(PerformanceCapture, TracksTheSyntheticPerformerWithoutDrift) {
+  const Sequence s = make_sequence("perf_capture", 30, 600);
+  PerformanceCapture pc;
+  pc.setCameras(s.studio.cameraList());
+  pc.setTemplate(s.rest);
+  StudioFrameStream stream(s.studio, {});
+  StudioFrame f;
+  std::vector<double> err;
+  double worst_iou = 1;
+  while (stream.next(f)) {
+    TriMesh m;
+    pc.track(f.images, f.silhouettes, f.frame, m);
+    const TriMesh gt = read_mesh(s.studio.groundTruthPath(f.frame));
+    ASSERT_EQ(m.V.rows(), gt.V.rows());
+    ASSERT_EQ(m.F, s.rest.F);  // constant connectivity
+    err.push_back((m.V - gt.V).rowwise().norm().mean() / s.diag);
+    const CaptureFrameReport& fr = pc.report().frames.back();
+    worst_iou = std::min(worst_iou, fr.iou_min);
+    std::printf("frame %2d: mean vertex error %.3f %% of the diagonal, view IoU min %.4f mean %.4f (pose %.4f), %d matches (%d anchor), "
+                "%d rims, %.2f s\n",
+                f.frame, 100 * err.back(), fr.iou_min, fr.iou_mean, fr.iou_pose, fr.temporal_matches + fr.anchor_matches, fr.anchor_matches,
+                fr.rim_constraints, fr.t_total);
+    if (f.frame > 0) {
+      EXPECT_GT(fr.temporal_matches, 200) << "frame " << f.frame;
+    }
+  }
+  ASSERT_EQ(err.size(), 30u);
+  const double worst = *std::max_element(err.begin(), err.end());
+  std::printf("worst frame error %.3f %%, worst view IoU %.4f, last/frame-5 error %.2f\n", 100 * worst, worst_iou, err.back() / err[5]);
+  // acceptance (issue 25): <= 1 % on every frame, IoU >= 0.97 per view, no drift; measured
+  // 0.51 % / 0.987 / 1.29 (docs/performance_capture.md)
+  EXPECT_LT(worst, 0.01);
+  EXPECT_GE(worst_iou, 0.97);
+  EXPECT_LE(err.back(), 1.5 * err[5]);
+  EXPECT_EQ(pc.report().failed_frames, 0);
 }
 
-#include "tbsp/deform/tet_deformer.h"
-#include "tbsp/mesh/point_search.h"
-#include "tbsp/mesh/tetrahedralize.h"
-TEST(PerformanceCapture, DISABLED_OracleHandles) {
-  const auto dir = test::temp_dir("pc_oracle");
-  synth::StudioOptions so;
-  so.frames = 30;
-  so.width = so.height = 64;
-  synth::write_synthetic_studio(dir.string(), so);
-  const Studio studio = read_studio((dir / "studio.yaml").string());
-  const TriMesh rest = read_mesh((dir / "template.ply").string());
-  const double diag = (rest.V.colwise().maxCoeff() - rest.V.colwise().minCoeff()).norm();
-  const TetMesh tets = surface_to_tets(rest);
-  std::vector<int> cand(std::size_t(rest.V.rows()));
-  for (int i = 0; i < int(cand.size()); ++i) cand[std::size_t(i)] = i;
-  for (int iters : {4, 12, 40}) {
-    TetDeformer D;
-    D.setMesh(tets);
-    const std::vector<int> hv = farthest_point_sample(rest.V, cand, 150);
-    for (int v : hv) D.addVertexHandle(v, rest.V.row(v).transpose());
-    std::printf("oracle, %d iterations per frame:", iters);
-    for (int f = 0; f < 30; ++f) {
-      const TriMesh gt = read_mesh(studio.groundTruthPath(f));
-      for (std::size_t h = 0; h < hv.size(); ++h) D.setHandleTarget(int(h), gt.V.row(hv[h]).transpose());
-      for (int it = 0; it < iters; ++it) D.iterate();
-      const Eigen::MatrixX3d X = D.inputPositions();
-      if (f % 3 == 0) std::printf(" %d:%.3f", f, 100 * (X.topRows(gt.V.rows()) - gt.V).rowwise().norm().mean() / diag);
+TEST(PerformanceCapture, BadInputIsAClearError) {
+  const Sequence s = make_sequence("perf_capture_bad", 1, 120);
+  const StudioFrame f = first_frame(s.studio);
+  const std::vector<Camera> cams = s.studio.cameraList();
+  auto fresh = [&]() {
+    auto pc = std::make_unique<PerformanceCapture>();
+    pc->setCameras(cams);
+    pc->setTemplate(s.rest);
+    return pc;
+  };
+  TriMesh out;
+  out.V = Eigen::MatrixX3d::Constant(1, 3, 7.0);
+  auto expect_error = [&](PerformanceCapture& pc, const std::vector<cv::Mat>& im, const std::vector<cv::Mat>& sil, const std::string& needle) {
+    try {
+      pc.track(im, sil, 0, out);
+      ADD_FAILURE() << "no error, expected one naming '" << needle << "'";
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
     }
-    std::printf("\n");
+    EXPECT_EQ(out.V.rows(), 1);  // untouched
+  };
+  {  // a silhouette of the wrong size
+    auto sil = f.silhouettes;
+    sil[2] = cv::Mat(50, 60, CV_8U, cv::Scalar(255));
+    expect_error(*fresh(), f.images, sil, "calibrated size");
   }
+  {  // an empty silhouette
+    auto sil = f.silhouettes;
+    sil[1] = cv::Mat(sil[1].size(), CV_8U, cv::Scalar(0));  // a new buffer: the frame's own stays intact
+    expect_error(*fresh(), f.images, sil, "empty");
+  }
+  {  // an image missing
+    auto im = f.images;
+    im.pop_back();
+    expect_error(*fresh(), im, f.silhouettes, "one image per camera");
+  }
+  {  // the template outside every view
+    auto pc = fresh();
+    TriMesh far = s.rest;
+    far.V.rowwise() += Eigen::RowVector3d(0, 0, 1000);
+    pc->setTemplate(far);
+    expect_error(*pc, f.images, f.silhouettes, "outside every view");
+  }
+  {  // no cameras
+    PerformanceCapture pc;
+    pc.setTemplate(s.rest);
+    expect_error(pc, f.images, f.silhouettes, "no cameras");
+  }
+  PerformanceCaptureOptions bad;
+  bad.handles = 2;
+  EXPECT_THROW(PerformanceCapture().setOptions(bad), InvalidInput);
+  bad = PerformanceCaptureOptions{};
+  bad.features = bad.silhouettes = false;
+  EXPECT_THROW(PerformanceCapture().setOptions(bad), InvalidInput);
+  bad = PerformanceCaptureOptions{};
+  bad.reject_px = bad.robust_px;
+  EXPECT_THROW(PerformanceCapture().setOptions(bad), InvalidInput);
 }
-TEST(PerformanceCapture, DISABLED_ResponseCheck) {
-  const TriMesh rest = synth::make_humanoid(1).mesh;
-  for (bool dec : {false, true}) {
-    const TetMesh tets = dec ? tetrahedralize_components(rest, 5000) : tetrahedralize_components(rest, 0);
-    const Eigen::MatrixX3i sf = tet_boundary_faces(tets.T);
-    std::vector<int> sv;
-    std::vector<char> seen(std::size_t(tets.V.rows()), 0);
-    for (Eigen::Index f = 0; f < sf.rows(); ++f) for (int k = 0; k < 3; ++k) if (!seen[std::size_t(sf(f, k))]) { seen[std::size_t(sf(f, k))] = 1; sv.push_back(sf(f, k)); }
-    TetDeformer D;
-    D.setMesh(tets);
-    const std::vector<int> hv = farthest_point_sample(tets.V, sv, 150);
-    for (int v : hv) D.addVertexHandle(v, tets.V.row(v).transpose());
-    const Eigen::MatrixXd R = D.handleResponse(sv);
-    D.iterate();
-    const Eigen::MatrixX3d X0 = D.positions();
-    const auto R0 = D.rotations();
-    D.setHandleTarget(7, tets.V.row(hv[7]).transpose() + Eigen::Vector3d(0.01, 0, 0));
-    D.setRotations(R0);
-    D.iterate();
-    const Eigen::MatrixX3d X1 = D.positions();
-    double maxerr = 0, maxmove = 0;
-    for (std::size_t k = 0; k < sv.size(); ++k) {
-      const double pred = 0.01 * R(Eigen::Index(k), 7), act = X1(sv[k], 0) - X0(sv[k], 0);
-      maxerr = std::max(maxerr, std::abs(pred - act));
-      maxmove = std::max(maxmove, std::abs(act));
+
+TEST(PerformanceCapture, SilhouettesOnlyAndHandleOptimizationRun) {
+  // The silhouette-only mode and the black-box handle optimization (NLopt) on 3 frames: they run,
+  // keep the overlap high and the optimizer does not make the overlap worse.
+  const Sequence s = make_sequence("perf_capture_modes", 3, 300);
+  for (const bool optimize : {false, true}) {
+    PerformanceCaptureOptions o;
+    o.features = optimize;  // the optimization run keeps the features; the other runs on silhouettes alone
+    o.optimize_handles = optimize;
+    o.max_evaluations = 60;
+    o.tets = 3000;
+    PerformanceCapture pc;
+    pc.setOptions(o);
+    pc.setCameras(s.studio.cameraList());
+    pc.setTemplate(s.rest);
+    StudioFrameStream stream(s.studio, {});
+    StudioFrame f;
+    while (stream.next(f)) {
+      TriMesh m;
+      pc.track(f.images, f.silhouettes, f.frame, m);
+      const CaptureFrameReport& fr = pc.report().frames.back();
+      EXPECT_GT(fr.iou_min, 0.9) << "frame " << f.frame << " optimize " << optimize;
+      if (optimize) {
+        EXPECT_GT(fr.evaluations, 10);
+        // the objective (1 - IoU + penalties) never increases; the overlap alone may give a little
+        EXPECT_GE(fr.opt_iou_after, fr.opt_iou_before - 0.005);
+        std::printf("frame %d: handle optimization %d evaluations, control IoU %.4f -> %.4f\n", f.frame, fr.evaluations, fr.opt_iou_before,
+                    fr.opt_iou_after);
+      } else {
+        EXPECT_EQ(fr.keypoints, 0);
+      }
     }
-    std::printf("decimated %d: %ld tets, surface %zu; response max error %.3g of max move %.3g\n", int(dec), long(tets.T.rows()), sv.size(), maxerr, maxmove);
   }
 }

@@ -354,6 +354,13 @@ TetMesh tetrahedralize_components(const TriMesh& surface, Eigen::Index target_te
   for (std::size_t i = 0; i < V.size(); ++i) out.V.row(Eigen::Index(i)) = V[i];
   out.T.resize(Eigen::Index(T.size()), 4);
   for (std::size_t i = 0; i < T.size(); ++i) out.T.row(Eigen::Index(i)) = T[i];
+  // zero-volume slivers TetGen can leave on a small decimated part (its boundary kept with -Y)
+  const Eigen::VectorXd vol = tet_signed_volumes(out.V, out.T).cwiseAbs();
+  const double tol = 1e-9 * vol.mean();
+  Eigen::Index kept = 0;
+  for (Eigen::Index t = 0; t < out.T.rows(); ++t)
+    if (vol(t) > tol) out.T.row(kept++) = out.T.row(t);
+  out.T.conservativeResize(kept, 4);
   if (decimated_surface) {
     decimated_surface->V.resize(Eigen::Index(DV.size()), 3);
     for (std::size_t i = 0; i < DV.size(); ++i) decimated_surface->V.row(Eigen::Index(i)) = DV[i];

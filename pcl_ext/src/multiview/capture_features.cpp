@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
 
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -20,8 +19,7 @@ ViewFeatures detect_features(const cv::Mat& image, const cv::Mat& silhouette, in
   if (image.channels() == 3) cv::cvtColor(image(roi), gray, cv::COLOR_BGR2GRAY);
   else gray = image(roi);
   std::vector<cv::KeyPoint> kp;
-  const double ct = std::getenv("TBSP_PC_CT") ? std::atof(std::getenv("TBSP_PC_CT")) : 0.04;
-  cv::Ptr<cv::SIFT> sift = cv::SIFT::create(max_features, 3, ct);
+  cv::Ptr<cv::SIFT> sift = cv::SIFT::create(max_features);
   sift->detectAndCompute(gray, mask(roi), kp, out.desc);
   out.pixel.reserve(kp.size());
   for (const cv::KeyPoint& k : kp) out.pixel.emplace_back(k.pt.x + roi.x, k.pt.y + roi.y);
@@ -33,7 +31,7 @@ LiftedFeatures lift_features(const ViewFeatures& f, const RenderBuffers& b, cons
   LiftedFeatures out;
   std::vector<int> rows;
   std::vector<const FeatureMatch*> track(f.pixel.size(), nullptr);
-  const int r = std::getenv("TBSP_PC_MARGIN") ? std::atoi(std::getenv("TBSP_PC_MARGIN")) : 2;
+  const int r = 2;  // no depth discontinuity within r pixels
   if (mesh && cam)
     for (const FeatureMatch& m : inherit)
       if (m.keypoint >= 0 && std::size_t(m.keypoint) < track.size()) track[std::size_t(m.keypoint)] = &m;

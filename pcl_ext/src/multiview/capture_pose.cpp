@@ -1,17 +1,12 @@
 #include "capture_pose.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 
-#include <Eigen/Sparse>
 #include <nlopt.h>
 
 #include "tbsp/core/error.h"
 #include "tbsp/multiview/rasterizer.h"
-#include "tbsp/solve/sparse_cholesky.h"
 #include "silhouette_match.h"
 
 namespace tbsp::detail {
@@ -23,93 +18,6 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 }  // namespace
-
-DisplacementResult solve_displacement(Eigen::Index n, const Eigen::MatrixX2i& edges, const std::vector<RayConstraint>& C,
-                                      const DisplacementOptions& o) {
-  DisplacementResult res;
-  res.d = Eigen::MatrixX3d::Zero(n, 3);
-  if (C.empty() || n == 0) return res;
-  std::vector<double> sizes;
-  sizes.reserve(C.size());
-  for (const auto& c : C) sizes.push_back(c.pixel_size);
-  const double sbar = median(sizes);
-  const double ref = 1.0 / (sbar * sbar);
-  using Trip = Eigen::Triplet<double>;
-  std::vector<Trip> base;
-  base.reserve(std::size_t(3 * n + 12 * edges.rows()));
-  for (Eigen::Index v = 0; v < n; ++v)
-    for (int c = 0; c < 3; ++c) base.emplace_back(int(3 * v + c), int(3 * v + c), o.prior * ref);
-  for (Eigen::Index e = 0; e < edges.rows(); ++e) {
-    const int a = edges(e, 0), b = edges(e, 1);
-    for (int c = 0; c < 3; ++c) {
-      base.emplace_back(3 * a + c, 3 * a + c, o.smoothness * ref);
-      base.emplace_back(3 * b + c, 3 * b + c, o.smoothness * ref);
-      base.emplace_back(3 * a + c, 3 * b + c, -o.smoothness * ref);
-      base.emplace_back(3 * b + c, 3 * a + c, -o.smoothness * ref);
-    }
-  }
-  std::vector<double> omega(C.size());
-  for (std::size_t i = 0; i < C.size(); ++i) omega[i] = C[i].weight;
-  std::vector<Eigen::Matrix3d> P(C.size());
-  for (std::size_t i = 0; i < C.size(); ++i) {
-    const Eigen::Vector3d r = C[i].dir.normalized();
-    P[i] = Eigen::Matrix3d::Identity() - r * r.transpose();
-  }
-  SparseCholesky chol;
-  std::vector<double> resid(C.size(), 0.0);
-  for (int round = 0; round <= o.reweights; ++round) {
-    std::vector<Trip> trips = base;
-    trips.reserve(base.size() + C.size() * 144);
-    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(3 * n);
-    for (std::size_t i = 0; i < C.size(); ++i) {
-      const RayConstraint& c = C[i];
-      const double inv = omega[i] / (c.pixel_size * c.pixel_size);
-      const Eigen::Vector3d r0 = P[i] * (c.p - c.origin);
-      for (int a = 0; a < 4; ++a) {
-        if (c.v[std::size_t(a)] < 0) continue;
-        const int va = c.v[std::size_t(a)];
-        rhs.segment<3>(3 * va) -= inv * c.w[std::size_t(a)] * r0;
-        for (int b = 0; b < 4; ++b) {
-          if (c.v[std::size_t(b)] < 0) continue;
-          const int vb = c.v[std::size_t(b)];
-          const double s = inv * c.w[std::size_t(a)] * c.w[std::size_t(b)];
-          for (int r = 0; r < 3; ++r)
-            for (int q = 0; q < 3; ++q) trips.emplace_back(3 * va + r, 3 * vb + q, s * P[i](r, q));
-        }
-      }
-    }
-    const auto ta = std::chrono::steady_clock::now();
-    Eigen::SparseMatrix<double> A(3 * n, 3 * n);
-    A.setFromTriplets(trips.begin(), trips.end());  // explicit zeros kept: the pattern is the same every round
-    const auto tb = std::chrono::steady_clock::now();
-    chol.compute(A);
-    const auto tc = std::chrono::steady_clock::now();
-    const Eigen::VectorXd d = chol.solve(rhs);
-    if (std::getenv("TBSP_PC_DEBUG")) std::fprintf(stderr, "  n %ld nnz %ld trips %zu assemble %.3f factor %.3f solve %.3f %s\n", long(3*n), long(A.nonZeros()), trips.size(),
-      std::chrono::duration<double>(tb-ta).count(), std::chrono::duration<double>(tc-tb).count(), std::chrono::duration<double>(std::chrono::steady_clock::now()-tc).count(), chol.backendName().c_str());
-    for (Eigen::Index v = 0; v < n; ++v) res.d.row(v) = d.segment<3>(3 * v).transpose();
-    for (std::size_t i = 0; i < C.size(); ++i) {
-      const RayConstraint& c = C[i];
-      Eigen::Vector3d q = c.p;
-      for (int a = 0; a < 4; ++a)
-        if (c.v[std::size_t(a)] >= 0) q += c.w[std::size_t(a)] * res.d.row(c.v[std::size_t(a)]).transpose();
-      resid[i] = (P[i] * (q - c.origin)).norm() / c.pixel_size;
-    }
-    if (round == o.reweights) break;
-    for (std::size_t i = 0; i < C.size(); ++i) {
-      const double r = resid[i];
-      omega[i] = r > o.reject_px ? 0.0 : C[i].weight * (r <= o.robust_px ? 1.0 : o.robust_px / r);
-    }
-  }
-  std::vector<double> in;
-  for (std::size_t i = 0; i < C.size(); ++i) {
-    if (resid[i] > o.reject_px) continue;
-    in.push_back(resid[i]);
-    (C[i].feature ? res.feature_inliers : res.rim_inliers)++;
-  }
-  res.median_residual_px = median(in);
-  return res;
-}
 
 Eigen::MatrixXd handle_stiffness(const Eigen::MatrixXd& R, const Eigen::MatrixX2i& edges) {
   Eigen::MatrixXd D(edges.rows(), R.cols());
@@ -124,7 +32,7 @@ Eigen::Matrix3d constraint_projector(const RayConstraint& c) {
 }
 
 HandleSolveResult solve_handles(const Eigen::MatrixXd& R, const Eigen::MatrixXd& K, const std::vector<RayConstraint>& C,
-                                const DisplacementOptions& o) {
+                                const HandleSolveOptions& o) {
   const Eigen::Index H = R.cols(), nc = Eigen::Index(C.size());
   HandleSolveResult res;
   res.dh = Eigen::MatrixX3d::Zero(H, 3);

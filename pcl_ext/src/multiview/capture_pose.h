@@ -31,40 +31,27 @@ struct RayConstraint {
 /// P (3x3) of a constraint: I - d dᵀ for a ray, n nᵀ for a plane.
 Eigen::Matrix3d constraint_projector(const RayConstraint& c);
 
-struct DisplacementOptions {
-  double smoothness = 0.2;  ///< per edge, pixels²
+struct HandleSolveOptions {
+  double smoothness = 0.2;  ///< weight of the handle stiffness (per template edge, pixels²)
   double robust_px = 2.0;   ///< Huber scale
   double reject_px = 8.0;   ///< outlier threshold after the first solve
-  double prior = 1e-3;      ///< pull of every displacement to 0 (keeps unconstrained parts determined)
+  double prior = 1e-3;      ///< pull of every handle move to 0 (keeps handles without data where they are)
   int reweights = 2;        ///< robust re-solves after the first
 };
 
-struct DisplacementResult {
-  Eigen::MatrixX3d d;            ///< per control-surface vertex
-  int feature_inliers = 0, rim_inliers = 0;
-  double median_residual_px = 0;  ///< of the inliers, after the solve
-};
-
-/// Minimizes Σ_i ρ(|P_i (p_i + W_i d − o_i)| / s_i) + smoothness Σ_edges |d_a − d_b|² / s̄² +
-/// prior Σ |d|² / s̄² over the displacements d of `n` control-surface vertices (P_i: projection
-/// orthogonal to ray i, s_i its pixel size, s̄ their median; ρ: Huber, then hard rejection).
-/// Sparse Cholesky, 3n unknowns.
-DisplacementResult solve_displacement(Eigen::Index n, const Eigen::MatrixX2i& edges, const std::vector<RayConstraint>& constraints,
-                                      const DisplacementOptions& o);
-
-/// Handle moves Δh (#handles × 3) that best satisfy the ray constraints through the deformer's
-/// linear response `response` (#control-surface vertices × #handles, TetDeformer::handleResponse,
-/// rotations fixed): min Σ_i ρ(|P_i (p_i + Σ_k w_k R_{v_k} Δh − o_i)| / s_i) + prior Σ |Δh|² / s̄².
+/// Handle moves Δh (#handles × 3) that best satisfy the constraints through the linear response
+/// `response` (#template vertices × #handles: TetDeformer::handleResponse carried through the
+/// transfer, rotations fixed; a constraint's v/w index its rows): min Σ_i ρ(|P_i (p_i + Σ_k w_k R_{v_k} Δh − o_i)| / s_i) + prior Σ |Δh|² / s̄².
 /// Dense normal equations (3·#handles unknowns), Huber reweighted, then hard rejection.
 struct HandleSolveResult {
   Eigen::MatrixX3d dh;
   int feature_inliers = 0, rim_inliers = 0;
   double median_residual_px = 0;
 };
-/// `stiffness` (#handles²): Σ over control-surface edges of |u_a − u_b|² for the surface motion
+/// `stiffness` (#handles²): Σ over template edges of |u_a − u_b|² for the template motion
 /// u = response · Δh (handle_stiffness), weighted by o.smoothness / s̄².
 HandleSolveResult solve_handles(const Eigen::MatrixXd& response, const Eigen::MatrixXd& stiffness, const std::vector<RayConstraint>& constraints,
-                                const DisplacementOptions& o);
+                                const HandleSolveOptions& o);
 /// Σ_edges (R_a − R_b)ᵀ (R_a − R_b) for the rows a, b of `response` joined by `edges`.
 Eigen::MatrixXd handle_stiffness(const Eigen::MatrixXd& response, const Eigen::MatrixX2i& edges);
 

@@ -2,8 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 
 #include <opencv2/imgproc.hpp>
 
@@ -183,7 +181,6 @@ namespace {
 struct FrameMatches {
   int camera = 0;
   detail::FeatureMatch m;
-  double weight = 1;
 };
 
 double pixel_size(const Camera& cam, const Eigen::Vector3d& X) { return std::max(cam.depth(X), 1e-9) / cam.K()(0, 0); }
@@ -243,21 +240,10 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
     for (int k = 0; k < n; ++k) {
       fr.temporal_matches += nt[std::size_t(k)];
       fr.anchor_matches += na[std::size_t(k)];
-      const double tw = std::getenv("TBSP_PC_TW") ? std::atof(std::getenv("TBSP_PC_TW")) : 1.0;
-      const double aw = std::getenv("TBSP_PC_AW") ? std::atof(std::getenv("TBSP_PC_AW")) : 1.0;
-      int idx = 0;
-      for (const auto& m : per[std::size_t(k)]) {
-        const double w = idx++ < nt[std::size_t(k)] ? tw : aw;
-        if (w > 0) matches.push_back({k, m, w});
-      }
+      for (const auto& m : per[std::size_t(k)]) matches.push_back({k, m});
     }
   }
   fr.t_match = seconds_since(t0);
-  if (const char* dbg = std::getenv("TBSP_PC_DUMP")) {
-    FILE* fp = std::fopen((std::string(dbg) + "/matches_" + std::to_string(frame) + ".txt").c_str(), "w");
-    for (const auto& m : matches) std::fprintf(fp, "%d %d %.9g %.9g %.9g %.6f %.6f\n", m.camera, m.m.face, m.m.bary(0), m.m.bary(1), m.m.bary(2), m.m.pixel.x(), m.m.pixel.y());
-    std::fclose(fp);
-  }
 
   // 2.-3. pose rounds: ray constraints -> displacement field -> handles -> TetDeformer
   RasterOptions ro;
@@ -267,11 +253,10 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
   rmo.search_px = o.search_px;
   rmo.max_distance_px = o.search_px;
   rmo.cos_max = 0.5;
-  detail::DisplacementOptions dopt;
+  detail::HandleSolveOptions dopt;
   dopt.smoothness = o.smoothness;
   dopt.robust_px = o.robust_px;
   dopt.reject_px = o.reject_px;
-  if (std::getenv("TBSP_PC_PRIOR")) dopt.prior = std::atof(std::getenv("TBSP_PC_PRIOR"));
   std::vector<RenderBuffers> buf;
   auto pose = [&](bool use_features, int rounds) {
     for (int r = 0; r < rounds; ++r) {
@@ -296,7 +281,6 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
           c.origin = ray.origin;
           c.dir = ray.direction;
           c.pixel_size = pixel_size(cam, c.p);
-          c.weight = matches[i].weight;
         }
       }
       int rims = 0;
@@ -325,7 +309,6 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
         }
       }
       if (C.empty()) break;
-      const auto tq = Clock::now();
       const detail::HandleSolveResult dr = detail::solve_handles(I.response, I.stiffness, C, dopt);
       fr.inliers = dr.feature_inliers;
       fr.rim_constraints = rims;
@@ -333,11 +316,8 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
         const int v = I.handle_vertex[h];
         I.D.setHandleTarget(int(h), (I.X.row(v) + dr.dh.row(Eigen::Index(h))).transpose());
       }
-      const double tsolve = seconds_since(tq);
-      const auto td = Clock::now();
       for (int it = 0; it < o.deformer_iterations; ++it) I.D.iterate();
       I.X = I.D.inputPositions();
-      if (std::getenv("TBSP_PC_DEBUG")) std::fprintf(stderr, "round %d: constraints %zu solve %.3f deform %.3f median %.2f px\n", r, C.size(), tsolve, seconds_since(td), dr.median_residual_px);
     }
   };
   if (first) {
@@ -370,8 +350,7 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
     ho.max_evaluations = o.max_evaluations;
     std::vector<Eigen::Vector3d> targets;
     for (int h : I.key) targets.push_back(I.X.row(I.handle_vertex[std::size_t(h)]).transpose());
-    double before = 0, after = 0;
-    fr.evaluations = detail::optimize_handles(I.D, I.key, targets, ho, before, after);
+    fr.evaluations = detail::optimize_handles(I.D, I.key, targets, ho, fr.opt_iou_before, fr.opt_iou_after);
     I.X = I.D.inputPositions();
   };
   t0 = Clock::now();

@@ -65,7 +65,8 @@ TetMesh tetrahedralize_to_size(const TriMesh& surface, Eigen::Index target_tets,
 /// results concatenated (vertex indices offset, components in the order of their first face).
 /// For templates modelled as overlapping closed parts (limbs pushed into a torso), which TetGen
 /// refuses as a whole because the parts intersect; each part becomes a volume of its own. The
-/// target is shared by the components' face counts (at least 20 tets each). Throws like
+/// target is shared by the components' face counts (at least 20 tets each). Zero-volume slivers
+/// (|volume| <= 1e-9 of the mean, which TetGen can leave on a small decimated part) are dropped. Throws like
 /// tetrahedralize when a component itself is open, non-manifold or self-intersecting.
 TetMesh tetrahedralize_components(const TriMesh& surface, Eigen::Index target_tets, const TetgenOptions& options = {},
                                   TriMesh* decimated_surface = nullptr);

@@ -13,12 +13,19 @@
 ///    *ray constraint*: the surface point must lie on the camera ray through the matched pixel.
 ///    Several views see each body part, so the rays of all views together fix it in 3D; there
 ///    is no explicit cross-view matching (it would add ambiguity, not information).
-/// 2. **silhouette rims** — rim vertices of the control surface matched to the input contour
-///    (§6.3.1: along the contour normal, gradient orientation test) give ray constraints too.
-/// 3. **pose** — a smooth displacement field on the control surface that best satisfies all ray
-///    constraints (robust least squares in pixels, Huber reweighted, outliers dropped) moves the
-///    handle vertices; the TetDeformer (as-rigid-as-possible, warm-started from the last frame)
-///    moves the rest. Repeated `pose_rounds` times, re-linearized each round.
+///    A keypoint matched over time keeps the surface point its track was first lifted to, so the
+///    identification does not drift with the mesh; matches whose image motion disagrees with
+///    their neighbours' are dropped.
+/// 2. **silhouette rims** — rim vertices of the template at its current pose matched to the input
+///    contour (§6.3.1: along the contour normal, gradient orientation test) give *plane*
+///    constraints (the plane through the camera centre and the contour's tangent: only the
+///    contour's normal direction is known, the rim slides along the contour).
+/// 3. **pose** — the handle targets (`handles` vertices of the control surface) that best satisfy
+///    all constraints, through the TetDeformer's exact linear response to its handles carried to
+///    the template by the transfer (TetDeformer::handleResponse), by robust least squares in
+///    pixels (Huber, then outliers dropped) with a stiffness term (the membrane energy of the
+///    motion the handles cause); then TetDeformer iterations (as-rigid-as-possible, warm-started
+///    from the last frame). Repeated `pose_rounds` times, re-linearized each round.
 /// 4. **handle optimization** (optional) — the thesis' black-box step: `key_handles` handles
 ///    are moved by NLopt's BOBYQA to maximize the silhouette overlap, with E_nonrigid (eq. 7.5)
 ///    and the handle distance as penalties.
@@ -50,13 +57,13 @@ namespace tbsp {
 /// docs/performance_capture.md used; none is tuned per sequence.
 struct PerformanceCaptureOptions {
   // control model
-  int tets = 5000;                 ///< tetrahedra of the control mesh (QEM + TetGen), >= 100; 0 = the template as is
+  int tets = 10000;                ///< tetrahedra of the control mesh (QEM + TetGen), >= 100; 0 = the template as is
   int handles = 150;               ///< handle vertices on the control surface (farthest-point sampled), 4..5000
   double transfer_radius = 0;      ///< DeformationTransfer radius, world units; 0 = automatic
   // pose
   int pose_rounds = 3;             ///< constraint → displacement → deformer rounds per frame, 1..20
   int deformer_iterations = 4;     ///< TetDeformer iterations per round, 1..100
-  double smoothness = 0.2;         ///< weight of the displacement field's smoothness (per edge, in pixels²), > 0
+  double smoothness = 0.2;         ///< weight of the handle stiffness (membrane energy of the motion, per template edge, in pixels²), > 0
   double robust_px = 2.0;          ///< Huber scale of the ray residuals, pixels, > 0
   double reject_px = 8.0;          ///< residuals above this (after the first solve) are outliers, pixels, > robust_px
   // features
@@ -92,7 +99,8 @@ struct CaptureFrameReport {
   std::vector<double> iou;           ///< per view, of the output mesh
   double iou_min = 0, iou_mean = 0;
   double iou_pose = 0;               ///< mean IoU after the pose step (before optimization/refinement)
-  int evaluations = 0;               ///< handle optimization
+  int evaluations = 0;               ///< handle optimization: objective evaluations
+  double opt_iou_before = 0, opt_iou_after = 0;  ///< handle optimization: mean IoU of the control surface (downscaled views)
   bool failed = false;               ///< tracking failure detected (iou_min < failure_iou after the retry)
   bool retried = false;              ///< the silhouette-only retry ran
   double t_features = 0, t_match = 0, t_pose = 0, t_optimize = 0, t_transfer = 0, t_refine = 0, t_total = 0;
