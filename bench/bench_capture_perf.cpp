@@ -5,7 +5,12 @@
 //    frames per second, peak RSS. Repeated N times; the median take is reported.
 // 2. The transfer to surfaces of 24k, ~50k and 98k vertices (the template; its lower half and all
 //    of it midpoint-subdivided) on the same control mesh: median ms per frame over 300 frames.
-// Performance capture from video (PerformanceCapture) is not built yet: no row for it.
+// 3. Performance capture from video (PerformanceCapture, §9.2) on the synthetic studio (8 views,
+//    --capture-size pixels, textured humanoid with a skirt, --capture-frames frames) for the
+//    performer at detail 1 (4.3k vertices) and 2 (17k): per-frame medians of SIFT, matching,
+//    pose (constraints + handle fit + deformer), optimization, transfer, refinement; and the
+//    accuracy against the ground truth (worst mean vertex error, worst view IoU, drift).
+//    bench_capture_perf --capture-frames 60 --capture-only is the acceptance run.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -20,20 +25,78 @@
 #include "tbsp/io/mocap_io.h"
 #include "tbsp/mesh/remeshing.h"
 #include "tbsp/mesh/tetrahedralize.h"
+#include "tbsp/io/studio.h"
 #include "tbsp/multiview/marker_animation.h"
+#include "tbsp/multiview/performance_capture.h"
 #include "tbsp/plugins/marker_map_json.h"
+#include "tbsp/plugins/synth_studio.h"
 
 using namespace tbsp;
 using namespace tbsp::bench;
 
+namespace {
+
+void capture_rows(int frames, int size, const std::vector<int>& details) {
+  std::printf("\n## Performance capture (8 views of %dx%d, %d frames; medians per frame, seconds)\n\n", size, size, frames);
+  std::printf("| template vertices | control tets | setup | SIFT | matching + lifting | pose | optimization | transfer | refinement | total per frame | "
+              "worst mean vertex error (%% diag) | worst view IoU | error last / frame 5 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  for (int detail : details) {
+    const std::string dir = "/tmp/tbsp_bench_capture_d" + std::to_string(detail);
+    synth::StudioOptions so;
+    so.frames = frames;
+    so.width = so.height = size;
+    so.detail = detail;
+    so.markers = 4;
+    synth::write_synthetic_studio(dir, so);
+    const Studio st = read_studio(dir + "/studio.yaml");
+    const TriMesh rest = read_mesh(dir + "/template.ply");
+    const double diag = (rest.V.colwise().maxCoeff() - rest.V.colwise().minCoeff()).norm();
+    PerformanceCapture pc;
+    pc.setCameras(st.cameraList());
+    pc.setTemplate(rest);
+    StudioFrameStream stream(st, {});
+    StudioFrame f;
+    std::vector<double> err;
+    double worst_iou = 1;
+    while (stream.next(f)) {
+      TriMesh m;
+      pc.track(f.images, f.silhouettes, f.frame, m);
+      const TriMesh gt = read_mesh(st.groundTruthPath(f.frame));
+      err.push_back((m.V - gt.V).rowwise().norm().mean() / diag);
+      worst_iou = std::min(worst_iou, pc.report().frames.back().iou_min);
+    }
+    const auto& r = pc.report();
+    std::vector<double> t[7];
+    for (std::size_t k = 1; k < r.frames.size(); ++k) {  // frame 0 registers; the rest track
+      const auto& fr = r.frames[k];
+      const double v[7] = {fr.t_features, fr.t_match, fr.t_pose, fr.t_optimize, fr.t_transfer, fr.t_refine, fr.t_total};
+      for (int q = 0; q < 7; ++q) t[q].push_back(v[q]);
+    }
+    std::printf("| %ld | %ld | %.2f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.3f | %.4f | %.2f |\n", long(rest.V.rows()), long(r.tets),
+                r.t_setup, median(t[0]), median(t[1]), median(t[2]), median(t[3]), median(t[4]), median(t[5]), median(t[6]),
+                100 * *std::max_element(err.begin(), err.end()), worst_iou, err.size() > 5 ? err.back() / err[5] : 0.0);
+    std::fflush(stdout);
+  }
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
-  int repeats = 3;
+  int repeats = 3, capture_frames = 10, capture_size = 1004;
+  bool capture_only = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--repeats") && i + 1 < argc) repeats = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--capture-frames") && i + 1 < argc) capture_frames = std::max(0, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--capture-size") && i + 1 < argc) capture_size = std::max(64, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--capture-only")) capture_only = true;
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only]\n");
       return 2;
     }
+  }
+  if (capture_only) {
+    capture_rows(capture_frames, capture_size, {1});
+    return 0;
   }
   const std::string shared = TBSP_SHARED_DATA_DIR;
   const MarkerTrajectories mk = read_c3d(shared + "/capture/surenkum__c3d_to_xyz/01_01.c3d");
@@ -113,5 +176,6 @@ int main(int argc, char** argv) {
     while (anim.next(m)) t.push_back(anim.report().frames.back().seconds_transfer);
     std::printf("| %ld | %.2f | %.2f |\n", long(sfc.V.rows()), setup, 1000 * median(t));
   }
+  if (capture_frames > 0) capture_rows(capture_frames, capture_size, {1, 2});
   return 0;
 }
