@@ -11,6 +11,11 @@
 //    pose (constraints + handle fit + deformer), optimization, transfer, refinement; and the
 //    accuracy against the ground truth (worst mean vertex error, worst view IoU, drift).
 //    bench_capture_perf --capture-frames 60 --capture-only is the acceptance run.
+// 4. --vlasic STEPS: a real captured performer, the Vlasic et al. 2008 samba and crane meshes of
+//    ../shared/data (frames 0000/0050/0100/0150, shared connectivity, ~10k vertices), rendered
+//    into an 8-camera studio (--capture-size) with the solid texture, STEPS in-between frames per
+//    gap made by interpolating vertex positions; template = frame 0000, tracked to the end; the
+//    error and IoU at the captured frames 0050/0100/0150 and the worst over all frames.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -79,23 +84,70 @@ void capture_rows(int frames, int size, const std::vector<int>& details) {
   }
 }
 
+void vlasic_rows(int steps, int size) {
+  const std::string base = std::string(TBSP_SHARED_DATA_DIR) + "/meshes/CraGL__Hyperspectral-Inverse-Skinning/models/";
+  std::printf("\n## Performance capture of the Vlasic meshes (8 views of %dx%d, %d in-between frames per 50 captured frames)\n\n", size, size, steps);
+  std::printf("| sequence | vertices | frames | error at 0050 / 0100 / 0150 (%% diag) | view IoU min at 0050 / 0100 / 0150 | worst error, all frames | worst view IoU, all frames | failed frames | s per frame |\n"
+              "|---|---|---|---|---|---|---|---|---|\n");
+  for (const char* seq : {"samba", "crane"}) {
+    std::vector<TriMesh> key;
+    for (const char* f : {"0000", "0050", "0100", "0150"}) key.push_back(read_mesh(base + seq + "/mesh_" + f + ".obj"));
+    const int frames = 3 * steps + 1;
+    auto frame = [&](int f) {
+      const int g = std::min(f / steps, 2);
+      const double t = double(f - g * steps) / steps;
+      TriMesh m = key[std::size_t(g)];
+      m.V = (1 - t) * key[std::size_t(g)].V + t * key[std::size_t(g + 1)].V;
+      return m;
+    };
+    const std::string dir = std::string("/tmp/tbsp_bench_vlasic_") + seq;
+    synth::StudioOptions so;
+    so.frames = frames;
+    so.width = so.height = size;
+    synth::write_sequence_studio(dir, key[0], frame, so);
+    const Studio st = read_studio(dir + "/studio.yaml");
+    const double diag = (key[0].V.colwise().maxCoeff() - key[0].V.colwise().minCoeff()).norm();
+    PerformanceCapture pc;
+    pc.setCameras(st.cameraList());
+    pc.setTemplate(key[0]);
+    StudioFrameStream stream(st, {});
+    StudioFrame fr;
+    std::vector<double> err, iou;
+    const auto t0 = Clock::now();
+    while (stream.next(fr)) {
+      TriMesh m;
+      pc.track(fr.images, fr.silhouettes, fr.frame, m);
+      err.push_back((m.V - frame(fr.frame).V).rowwise().norm().mean() / diag);
+      iou.push_back(pc.report().frames.back().iou_min);
+    }
+    const double secs = since(t0) / frames;
+    std::printf("| %s | %ld | %d | %.2f / %.2f / %.2f | %.3f / %.3f / %.3f | %.2f | %.3f | %d | %.2f |\n", seq, long(key[0].V.rows()), frames,
+                100 * err[std::size_t(steps)], 100 * err[std::size_t(2 * steps)], 100 * err[std::size_t(3 * steps)], iou[std::size_t(steps)],
+                iou[std::size_t(2 * steps)], iou[std::size_t(3 * steps)], 100 * *std::max_element(err.begin(), err.end()),
+                *std::min_element(iou.begin(), iou.end()), pc.report().failed_frames, secs);
+    std::fflush(stdout);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  int repeats = 3, capture_frames = 10, capture_size = 1004;
+  int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0;
   bool capture_only = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--repeats") && i + 1 < argc) repeats = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--capture-frames") && i + 1 < argc) capture_frames = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--capture-size") && i + 1 < argc) capture_size = std::max(64, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--capture-only")) capture_only = true;
+    else if (!std::strcmp(argv[i], "--vlasic") && i + 1 < argc) vlasic = std::max(0, std::atoi(argv[++i]));
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only] [--vlasic STEPS]\n");
       return 2;
     }
   }
-  if (capture_only) {
-    capture_rows(capture_frames, capture_size, {1});
+  if (capture_only || vlasic > 0) {
+    if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {1});
+    if (vlasic > 0) vlasic_rows(vlasic, capture_size);
     return 0;
   }
   const std::string shared = TBSP_SHARED_DATA_DIR;

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <random>
 
 #include <Eigen/Geometry>
@@ -154,38 +155,33 @@ TriMesh animate_humanoid(const Humanoid& h, double t) {
   return m;
 }
 
-StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions& o, const ProgressCallback& progress) {
-  const std::string who = "[tbsp synth-studio] ";
+namespace {
+
+void check_options(const StudioOptions& o, const std::string& who) {
   if (o.cameras < 1 || o.cameras > 64) throw InvalidInput(who + "cameras must be 1..64 (got " + std::to_string(o.cameras) + ")");
   if (o.width < 16 || o.height < 16 || o.width > 8192 || o.height > 8192) throw InvalidInput(who + "image size must be 16..8192 pixels");
   if (o.frames < 1 || o.frames > 100000) throw InvalidInput(who + "frames must be >= 1");
   if (!(o.frame_rate > 0)) throw InvalidInput(who + "frame rate must be positive");
   if (o.image_noise < 0 || o.scan_noise < 0) throw InvalidInput(who + "noise must be >= 0");
   if (o.markers < 0) throw InvalidInput(who + "markers must be >= 0");
+}
+
+// The studio's frame range, file patterns and folders; cameras from `eyes` looking at `target`.
+void setup_studio(const std::string& dir, const StudioOptions& o, const std::string& name, const std::vector<Eigen::Vector3d>& eyes,
+                  const Eigen::Vector3d& target, double hfov, Studio& s) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec || !fs::is_directory(dir)) throw FileError("'" + dir + "': cannot create the output folder (" + ec.message() + ")");
-
-  const Humanoid hum = make_humanoid(o.detail, o.folds);
-  StudioResult res;
-  res.vertices = static_cast<int>(hum.mesh.V.rows());
-  res.faces = static_cast<int>(hum.mesh.F.rows());
-  Studio& s = res.studio;
   s.path = (fs::path(dir) / "studio.yaml").string();
-  s.name = "tbsp synthetic studio (procedural humanoid with a skirt)";
+  s.name = name;
   s.frame_rate = o.frame_rate;
   s.first_frame = 0;
   s.last_frame = o.frames - 1;
   s.template_mesh = "template.ply";
   s.ground_truth = "gt/%04d.ply";
-  if (o.markers > 0) s.markers = "markers.trc";
-  // Cameras on a ring around the performer, alternating heights, all looking at the hips.
-  const double hfov = 2 * std::atan(1.05 / 3.6 * std::max(1.0, double(o.width) / o.height));
-  for (int c = 0; c < o.cameras; ++c) {
-    const double a = 2 * M_PI * c / o.cameras + 0.3;
-    const Eigen::Vector3d eye(3.6 * std::sin(a), (c % 2) ? 2.1 : 1.1, 3.6 * std::cos(a));
+  for (std::size_t c = 0; c < eyes.size(); ++c) {
     StudioCamera sc;
-    sc.camera = Camera::lookAt("cam" + std::to_string(c), o.width, o.height, hfov, eye, {0, 0.9, 0.1 * o.frames / o.frame_rate}, {0, 1, 0});
+    sc.camera = Camera::lookAt("cam" + std::to_string(c), o.width, o.height, hfov, eyes[c], target, {0, 1, 0});
     sc.images = "images/cam" + std::to_string(c) + "/%04d.png";
     sc.silhouettes = "silhouettes/cam" + std::to_string(c) + "/%04d.png";
     s.cameras.push_back(sc);
@@ -194,6 +190,92 @@ StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions&
     if (o.range_scans) fs::create_directories(fs::path(dir) / "scans" / sc.camera.name());
   }
   fs::create_directories(fs::path(dir) / "gt");
+}
+
+// Renders frame f (mesh m; `rest` carries the solid texture) into every camera: image,
+// silhouette [, range scan]. Throws FileError naming what could not be written.
+void render_frame(const std::string& dir, const Studio& s, const TriMesh& rest, const TriMesh& m, int f, const StudioOptions& o,
+                  const std::string& who) {
+  const Rasterizer raster;
+  const Eigen::MatrixX3d VN = vertex_normals(m.V, m.F);
+  std::vector<std::string> errors(s.cameras.size());
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int c = 0; c < static_cast<int>(s.cameras.size()); ++c) {
+    try {
+      const Camera& cam = s.cameras[std::size_t(c)].camera;
+      RenderBuffers b;
+      raster.render(m, cam, b);
+      cv::Mat img(o.height, o.width, CV_8UC3);
+      std::mt19937_64 rng(o.seed * 1000003ull + static_cast<std::uint64_t>(f) * 131ull + static_cast<std::uint64_t>(c));
+      std::normal_distribution<double> gauss(0.0, 1.0);
+      const Eigen::Vector3d C = cam.center();
+      for (int y = 0; y < o.height; ++y) {
+        auto* row = img.ptr<cv::Vec3b>(y);
+        for (int x = 0; x < o.width; ++x) {
+          const std::size_t i = static_cast<std::size_t>(y) * o.width + x;
+          cv::Vec3b col(70, 75, 80);  // studio backdrop
+          const int fi = b.face[i];
+          if (fi >= 0) {
+            const double b1 = b.bary[2 * i], b2 = b.bary[2 * i + 1], b0 = 1 - b1 - b2;
+            const Eigen::Vector3d r = b0 * rest.V.row(m.F(fi, 0)).transpose() + b1 * rest.V.row(m.F(fi, 1)).transpose() +
+                                      b2 * rest.V.row(m.F(fi, 2)).transpose();
+            const Eigen::Vector3d X = b0 * m.V.row(m.F(fi, 0)).transpose() + b1 * m.V.row(m.F(fi, 1)).transpose() +
+                                      b2 * m.V.row(m.F(fi, 2)).transpose();
+            // Lambertian under the studio's fixed lights (view-independent radiance, as
+            // multi-view stereo assumes), smooth-shaded with interpolated vertex normals.
+            Eigen::Vector3d nrm = (b0 * VN.row(m.F(fi, 0)) + b1 * VN.row(m.F(fi, 1)) + b2 * VN.row(m.F(fi, 2))).transpose();
+            nrm.normalize();
+            if (nrm.dot(C - X) < 0) nrm = -nrm;  // inside of an open part
+            const double shade = 0.4 + 0.45 * std::max(0.0, nrm.dot(kKeyLight)) + 0.25 * std::max(0.0, nrm.dot(kFillLight));
+            const cv::Vec3b t = solid_texture(r);
+            for (int ch = 0; ch < 3; ++ch) col[ch] = static_cast<std::uint8_t>(std::clamp(t[ch] * shade, 0.0, 255.0));
+          }
+          if (o.image_noise > 0)
+            for (int ch = 0; ch < 3; ++ch) col[ch] = static_cast<std::uint8_t>(std::clamp(col[ch] + o.image_noise * gauss(rng), 0.0, 255.0));
+          row[x] = col;
+        }
+      }
+      auto save = [&](const std::string& path, const cv::Mat& im) {
+        atomic_write_with(path, [&](const std::string& tmp) { return cv::imwrite(tmp + ".png", im) && (fs::rename(tmp + ".png", tmp), true); });
+      };
+      save(s.imagePath(c, f), img);
+      save(s.silhouettePath(c, f), mask_image(b));
+      if (o.range_scans) {
+        RangeScanOptions ro;
+        ro.noise_sigma = o.scan_noise;
+        ro.stride = o.scan_stride;
+        ro.seed = o.seed + static_cast<std::uint64_t>(f) * 64 + static_cast<std::uint64_t>(c);
+        const auto cloud = range_scan(m, cam, ro);
+        const std::string p = (fs::path(dir) / "scans" / cam.name() / (expand_frame_pattern("%04d", f) + ".pcd")).string();
+        atomic_write_with(p, [&](const std::string& tmp) { return pcl::io::savePCDFileBinary(tmp, cloud) == 0; });
+      }
+    } catch (const std::exception& e) {
+      errors[static_cast<std::size_t>(c)] = e.what();
+    }
+  }
+  for (const auto& e : errors)
+    if (!e.empty()) throw FileError(who + e);
+}
+
+}  // namespace
+
+StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions& o, const ProgressCallback& progress) {
+  const std::string who = "[tbsp synth-studio] ";
+  check_options(o, who);
+  const Humanoid hum = make_humanoid(o.detail, o.folds);
+  StudioResult res;
+  res.vertices = static_cast<int>(hum.mesh.V.rows());
+  res.faces = static_cast<int>(hum.mesh.F.rows());
+  Studio& s = res.studio;
+  // Cameras on a ring around the performer, alternating heights, all looking at the hips.
+  const double hfov = 2 * std::atan(1.05 / 3.6 * std::max(1.0, double(o.width) / o.height));
+  std::vector<Eigen::Vector3d> eyes;
+  for (int c = 0; c < o.cameras; ++c) {
+    const double a = 2 * M_PI * c / o.cameras + 0.3;
+    eyes.emplace_back(3.6 * std::sin(a), (c % 2) ? 2.1 : 1.1, 3.6 * std::cos(a));
+  }
+  setup_studio(dir, o, "tbsp synthetic studio (procedural humanoid with a skirt)", eyes, {0, 0.9, 0.1 * o.frames / o.frame_rate}, hfov, s);
+  if (o.markers > 0) s.markers = "markers.trc";
   write_mesh((fs::path(dir) / "template.ply").string(), hum.mesh);
 
   // Markers: farthest-point samples of the rest pose.
@@ -216,74 +298,58 @@ StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions&
   for (int v : marker_vertices) mk.names.push_back("V" + std::to_string(v));
   mk.data.resize(o.frames, 3 * static_cast<Eigen::Index>(marker_vertices.size()));
 
-  const Rasterizer raster;
   for (int f = 0; f < o.frames; ++f) {
     report_progress(progress, double(f) / o.frames, "rendering");
     const TriMesh m = animate_humanoid(hum, f / o.frame_rate);
     for (std::size_t k = 0; k < marker_vertices.size(); ++k) mk.data.block<1, 3>(f, 3 * static_cast<Eigen::Index>(k)) = m.V.row(marker_vertices[k]);
     write_mesh(s.groundTruthPath(f), m);
-    const Eigen::MatrixX3d VN = vertex_normals(m.V, m.F);
-    std::vector<std::string> errors(s.cameras.size());
-#pragma omp parallel for schedule(dynamic, 1)
-    for (int c = 0; c < static_cast<int>(s.cameras.size()); ++c) {
-      try {
-        const Camera& cam = s.cameras[c].camera;
-        RenderBuffers b;
-        raster.render(m, cam, b);
-        cv::Mat img(o.height, o.width, CV_8UC3);
-        std::mt19937_64 rng(o.seed * 1000003ull + static_cast<std::uint64_t>(f) * 131ull + static_cast<std::uint64_t>(c));
-        std::normal_distribution<double> gauss(0.0, 1.0);
-        const Eigen::Vector3d C = cam.center();
-        for (int y = 0; y < o.height; ++y) {
-          auto* row = img.ptr<cv::Vec3b>(y);
-          for (int x = 0; x < o.width; ++x) {
-            const std::size_t i = static_cast<std::size_t>(y) * o.width + x;
-            cv::Vec3b col(70, 75, 80);  // studio backdrop
-            const int fi = b.face[i];
-            if (fi >= 0) {
-              const double b1 = b.bary[2 * i], b2 = b.bary[2 * i + 1], b0 = 1 - b1 - b2;
-              const Eigen::Vector3d rest = b0 * hum.mesh.V.row(m.F(fi, 0)).transpose() + b1 * hum.mesh.V.row(m.F(fi, 1)).transpose() +
-                                           b2 * hum.mesh.V.row(m.F(fi, 2)).transpose();
-              const Eigen::Vector3d X = b0 * m.V.row(m.F(fi, 0)).transpose() + b1 * m.V.row(m.F(fi, 1)).transpose() +
-                                        b2 * m.V.row(m.F(fi, 2)).transpose();
-              // Lambertian under the studio's fixed lights (view-independent radiance, as
-              // multi-view stereo assumes), smooth-shaded with interpolated vertex normals.
-              Eigen::Vector3d nrm = (b0 * VN.row(m.F(fi, 0)) + b1 * VN.row(m.F(fi, 1)) + b2 * VN.row(m.F(fi, 2))).transpose();
-              nrm.normalize();
-              if (nrm.dot(C - X) < 0) nrm = -nrm;  // inside of an open part
-              const double shade = 0.4 + 0.45 * std::max(0.0, nrm.dot(kKeyLight)) + 0.25 * std::max(0.0, nrm.dot(kFillLight));
-              const cv::Vec3b t = solid_texture(rest);
-              for (int ch = 0; ch < 3; ++ch) col[ch] = static_cast<std::uint8_t>(std::clamp(t[ch] * shade, 0.0, 255.0));
-            }
-            if (o.image_noise > 0)
-              for (int ch = 0; ch < 3; ++ch) col[ch] = static_cast<std::uint8_t>(std::clamp(col[ch] + o.image_noise * gauss(rng), 0.0, 255.0));
-            row[x] = col;
-          }
-        }
-        auto save = [&](const std::string& path, const cv::Mat& im) {
-          atomic_write_with(path, [&](const std::string& tmp) { return cv::imwrite(tmp + ".png", im) && (fs::rename(tmp + ".png", tmp), true); });
-        };
-        save(s.imagePath(c, f), img);
-        save(s.silhouettePath(c, f), mask_image(b));
-        if (o.range_scans) {
-          RangeScanOptions ro;
-          ro.noise_sigma = o.scan_noise;
-          ro.stride = o.scan_stride;
-          ro.seed = o.seed + static_cast<std::uint64_t>(f) * 64 + static_cast<std::uint64_t>(c);
-          const auto cloud = range_scan(m, cam, ro);
-          const std::string p = (fs::path(dir) / "scans" / cam.name() / (expand_frame_pattern("%04d", f) + ".pcd")).string();
-          atomic_write_with(p, [&](const std::string& tmp) { return pcl::io::savePCDFileBinary(tmp, cloud) == 0; });
-        }
-      } catch (const std::exception& e) {
-        errors[static_cast<std::size_t>(c)] = e.what();
-      }
-    }
-    for (const auto& e : errors)
-      if (!e.empty()) throw FileError(who + e);
+    render_frame(dir, s, hum.mesh, m, f, o, who);
     res.images_written += 2 * o.cameras;
   }
   if (o.markers > 0) write_trc((fs::path(dir) / "markers.trc").string(), mk);
   write_studio(s.path, s);  // last: a complete dataset
+  report_progress(progress, 1.0, "done");
+  return res;
+}
+
+StudioResult write_sequence_studio(const std::string& dir, const TriMesh& rest, const std::function<TriMesh(int)>& frame,
+                                   const StudioOptions& o, const ProgressCallback& progress) {
+  const std::string who = "[tbsp::synth::write_sequence_studio] ";
+  check_options(o, who);
+  if (rest.V.rows() < 4 || rest.F.rows() < 4) throw InvalidInput(who + "the rest mesh is empty");
+  // The sequence's extent (y up): cameras on a ring of radius 2 x its height around its centre.
+  Eigen::RowVector3d lo = rest.V.colwise().minCoeff(), hi = rest.V.colwise().maxCoeff();
+  for (int f = 0; f < o.frames; ++f) {
+    const TriMesh m = frame(f);
+    if (m.V.rows() != rest.V.rows() || m.F.rows() != rest.F.rows())
+      throw InvalidInput(who + "frame " + std::to_string(f) + " has " + std::to_string(m.V.rows()) + " vertices / " + std::to_string(m.F.rows()) +
+                         " faces; the rest mesh has " + std::to_string(rest.V.rows()) + " / " + std::to_string(rest.F.rows()) + " (constant connectivity needed)");
+    lo = lo.cwiseMin(m.V.colwise().minCoeff());
+    hi = hi.cwiseMax(m.V.colwise().maxCoeff());
+  }
+  const Eigen::Vector3d c = (0.5 * (lo + hi)).transpose();
+  const double H = std::max(hi(1) - lo(1), 1e-9), R = 2.0 * H;
+  const double reach = 0.55 * std::max(H, std::max(hi(0) - lo(0), hi(2) - lo(2)));
+  const double hfov = 2 * std::atan(reach / R * std::max(1.0, double(o.width) / o.height));
+  std::vector<Eigen::Vector3d> eyes;
+  for (int k = 0; k < o.cameras; ++k) {
+    const double a = 2 * M_PI * k / o.cameras + 0.3;
+    eyes.emplace_back(c.x() + R * std::sin(a), c.y() + ((k % 2) ? 0.65 : 0.1) * H, c.z() + R * std::cos(a));
+  }
+  StudioResult res;
+  res.vertices = static_cast<int>(rest.V.rows());
+  res.faces = static_cast<int>(rest.F.rows());
+  Studio& s = res.studio;
+  setup_studio(dir, o, "tbsp studio rendered around a mesh sequence", eyes, c, hfov, s);
+  write_mesh((fs::path(dir) / "template.ply").string(), rest);
+  for (int f = 0; f < o.frames; ++f) {
+    report_progress(progress, double(f) / o.frames, "rendering");
+    const TriMesh m = frame(f);
+    write_mesh(s.groundTruthPath(f), m);
+    render_frame(dir, s, rest, m, f, o, who);
+    res.images_written += 2 * o.cameras;
+  }
+  write_studio(s.path, s);
   report_progress(progress, 1.0, "done");
   return res;
 }

@@ -7,6 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_json.h"
 #include "cli_util.h"
 #include "test_util.h"
 #include "tbsp/io/mesh_io.h"
@@ -16,10 +17,6 @@ using namespace tbsp;
 namespace fs = std::filesystem;
 
 namespace {
-nlohmann::json load(const fs::path& p) {
-  std::ifstream in(p);
-  return nlohmann::json::parse(in);
-}
 // synth-studio names its markers "V<vertex>": the map follows from the TRC's labels.
 void write_map(const fs::path& trc, const fs::path& out, const std::string& rename_first = "") {
   const MarkerTrajectories mk = read_trc(trc.string());
@@ -43,7 +40,7 @@ TEST(CliAnimate, MarkersDriveTheTemplateIntoMeshesReportAndContactSheet) {
   for (const char* f : {"mesh_0000.ply", "mesh_0002.ply", "mesh_0004.ply", "animate_report.json", "contact_sheet.png"})
     EXPECT_TRUE(fs::exists(out / f)) << f;
   EXPECT_FALSE(fs::exists(out / "mesh_0001.ply"));  // --every 2
-  const auto rep = load(out / "animate_report.json");
+  const auto rep = test::load_json(out / "animate_report.json");
   EXPECT_EQ(rep["frames"].get<int>(), 6);
   EXPECT_EQ(rep["per_frame"].size(), 6u);
   EXPECT_EQ(rep["meshes_written"].get<int>(), 3);

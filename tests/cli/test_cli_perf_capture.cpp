@@ -8,19 +8,13 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "cli_json.h"
 #include "cli_util.h"
 #include "test_util.h"
 #include "tbsp/io/mesh_io.h"
 
 using namespace tbsp;
 namespace fs = std::filesystem;
-
-namespace {
-nlohmann::json load(const fs::path& p) {
-  std::ifstream in(p);
-  return nlohmann::json::parse(in);
-}
-}  // namespace
 
 TEST(CliPerfCapture, TracksAStudioIntoMeshesReportAndOverlays) {
   const auto dir = test::temp_dir("cli_capture");
@@ -37,7 +31,7 @@ TEST(CliPerfCapture, TracksAStudioIntoMeshesReportAndOverlays) {
   const cv::Mat ov = cv::imread((out / "overlay_0003.png").string());
   EXPECT_EQ(ov.cols, 4 * 300);  // 8 views in a 4 x 2 grid of 300 x 400 panels
   EXPECT_EQ(ov.rows, 2 * 400);
-  const auto rep = load(out / "capture_report.json");
+  const auto rep = test::load_json(out / "capture_report.json");
   EXPECT_EQ(rep["frames"].get<int>(), 3);
   ASSERT_EQ(rep["per_frame"].size(), 3u);
   EXPECT_EQ(rep["per_frame"][0]["iou"].size(), 8u);
@@ -62,7 +56,7 @@ TEST(CliPerfCapture, TracksAStudioIntoMeshesReportAndOverlays) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("cam2"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("empty"), std::string::npos) << r.err;
-  const auto rep2 = load(out2 / "capture_report.json");
+  const auto rep2 = test::load_json(out2 / "capture_report.json");
   EXPECT_EQ(rep2["frames"].get<int>(), 2);
   EXPECT_TRUE(rep2.contains("error"));
   EXPECT_TRUE(fs::exists(out2 / "mesh_0002.ply"));

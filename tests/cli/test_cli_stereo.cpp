@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "cli_json.h"
 #include "cli_util.h"
 #include "test_util.h"
 #include "tbsp/io/cloud_io.h"
@@ -17,10 +18,6 @@ namespace fs = std::filesystem;
 
 namespace {
 test::CliResult run(const std::string& args, const fs::path& dir) { return test::run_cli(args, dir); }
-nlohmann::json load(const fs::path& p) {
-  std::ifstream in(p);
-  return nlohmann::json::parse(in);
-}
 }  // namespace
 
 TEST(CliStereo, StudioFramesToFusedCloudsDepthMapsRenderAndReport) {
@@ -32,7 +29,7 @@ TEST(CliStereo, StudioFramesToFusedCloudsDepthMapsRenderAndReport) {
   ASSERT_EQ(r.code, 0) << r.err;
   for (const char* f : {"cloud_0000.ply", "cloud_0001.ply", "cloud_0000.png", "stereo_report.json"})
     EXPECT_TRUE(fs::exists(out + "/" + f)) << f;
-  const auto rep = load(out + "/stereo_report.json");
+  const auto rep = test::load_json(out + "/stereo_report.json");
   ASSERT_EQ(rep["frames"].size(), 2u);
   const auto& f0 = rep["frames"][0];
   EXPECT_GE(f0["pairs"].size(), 6u);
@@ -71,7 +68,7 @@ TEST(CliStereo, RectifiedPairWithGroundTruthAndBadInput) {
   const std::string out = (dir / "pair").string();
   auto r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --disparities 64 --gt " + m + "disp2.png --gt-scale 4 --out " + out, dir);
   ASSERT_EQ(r.code, 0) << r.err;
-  const auto rep = load(out + "/stereo_report.json");
+  const auto rep = test::load_json(out + "/stereo_report.json");
   EXPECT_LT(rep["bad_pixels_1px_percent"].get<double>(), 12.5);  // measured 10.1 %
   const cv::Mat d = cv::imread(out + "/disparity.png", cv::IMREAD_ANYDEPTH);
   ASSERT_EQ(d.type(), CV_16U);
@@ -82,7 +79,7 @@ TEST(CliStereo, RectifiedPairWithGroundTruthAndBadInput) {
   std::ofstream(calib) << "cam0=[1000 0 225; 0 1000 187; 0 0 1]\ncam1=[1000 0 225; 0 1000 187; 0 0 1]\nbaseline=100\nwidth=450\nheight=375\nndisp=64\n";
   r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --calib " + calib + " --out " + out, dir);
   ASSERT_EQ(r.code, 0) << r.err;
-  EXPECT_GT(load(out + "/stereo_report.json")["points"].get<long>(), 100000);
+  EXPECT_GT(test::load_json(out + "/stereo_report.json")["points"].get<long>(), 100000);
   // Bad input: exit 2 with a message naming the file.
   r = run("stereo --left " + m + "im2.png --right " + (dir / "nope.png").string() + " --out " + out, dir);
   EXPECT_EQ(r.code, 2);
@@ -107,7 +104,7 @@ TEST(CliStereo, RefineStereoKeepsAGoodMeshAndNamesMissingMeshes) {
   r = run("refine-stereo " + st + " --meshes " + st + "/gt --out " + out + " -q", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::exists(out + "/refined_0000.ply"));
-  const auto rep = load(out + "/refine_report.json");
+  const auto rep = test::load_json(out + "/refine_report.json");
   ASSERT_EQ(rep["frames"].size(), 1u);
   EXPECT_GT(rep["frames"][0]["points"].get<long>(), 1000);
   EXPECT_LT(rep["frames"][0]["mean_vertex_move"].get<double>(), 0.006);
@@ -125,7 +122,7 @@ TEST(CliStereo, RefineSilhouetteKeepsAMatchingMeshAndRefusesBadOptions) {
   r = run("refine-silhouette " + st + " --meshes " + st + "/gt/%04d.ply --frames 1 --out " + out + " -q", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::exists(out + "/refined_0001.ply"));
-  const auto rep = load(out + "/silhouette_report.json");
+  const auto rep = test::load_json(out + "/silhouette_report.json");
   ASSERT_EQ(rep["frames"].size(), 1u);
   EXPECT_EQ(rep["frames"][0]["views"].size(), 6u);
   // The ground truth already matches: the mismatch does not grow.

@@ -9,7 +9,6 @@
 #include "tbsp/core/timer.h"
 #include "tbsp/deform/deformation_transfer.h"
 #include "tbsp/deform/tet_deformer.h"
-#include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/mesh/point_search.h"
 #include "tbsp/mesh/tetrahedralize.h"
 #include "tbsp/mesh/topology.h"
@@ -364,16 +363,25 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
     m.F = template_.F;
     fr.t_transfer += seconds_since(t1);
     t1 = Clock::now();
-    SilhouetteRefinement sr;
-    SilhouetteRefinementOptions so;
-    so.max_iterations = std::max(1, o.refine_iterations);
-    sr.setOptions(so);
-    sr.setInputFrame(cameras_, silhouettes, frame);
-    sr.setInputMesh(m);
-    TriMesh refined;
-    sr.refine(refined);  // also measures the overlap
-    rr = sr.report();
-    if (o.refine_iterations > 0) m = std::move(refined);
+    if (o.refine_iterations > 0) {
+      SilhouetteRefinement sr;
+      SilhouetteRefinementOptions so;
+      so.max_iterations = o.refine_iterations;
+      sr.setOptions(so);
+      sr.setInputFrame(cameras_, silhouettes, frame);
+      sr.setInputMesh(m);
+      TriMesh refined;
+      sr.refine(refined);  // also measures the overlap before and after
+      rr = sr.report();
+      m = std::move(refined);
+    } else {  // the overlap only
+      coarse.renderViews(m, cameras_, buf);
+      rr = SilhouetteRefinementReport{};
+      rr.views.resize(static_cast<std::size_t>(n));
+      for (int k = 0; k < n; ++k)
+        rr.views[std::size_t(k)].iou_before = rr.views[std::size_t(k)].iou_after =
+            detail::silhouette_overlap(buf[std::size_t(k)].mask, silhouettes[std::size_t(k)]).iou;
+    }
     fr.t_refine += seconds_since(t1);
   };
   report_progress(progress_, 0.8, "refine");

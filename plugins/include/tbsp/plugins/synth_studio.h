@@ -8,6 +8,7 @@
 /// Deterministic for a given seed.
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "tbsp/core/progress.h"
@@ -60,5 +61,16 @@ struct StudioResult {
 /// when `progress` returns false.
 StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions& options,
                                     const ProgressCallback& progress = {});
+
+/// Renders any mesh sequence with constant connectivity into a studio the same way (solid
+/// texture carried by `rest`'s positions, so it moves with the surface; the same lights):
+/// `frame(f)` is frame f's mesh, f = 0..options.frames-1 (y up). The cameras stand on a ring of
+/// radius 2 × the sequence's height around its bounding box, alternating heights, looking at its
+/// centre. Writes studio.yaml, template.ply (= `rest`), images/, silhouettes/, gt/FFFF.ply [,
+/// scans/]; no markers. Uses cameras, width, height, frames, frame_rate, image_noise,
+/// range_scans, scan_noise, scan_stride, seed of `options`. Throws InvalidInput on bad options
+/// or a frame whose vertex or face count differs from `rest`'s.
+StudioResult write_sequence_studio(const std::string& dir, const TriMesh& rest, const std::function<TriMesh(int)>& frame,
+                                   const StudioOptions& options, const ProgressCallback& progress = {});
 
 }  // namespace tbsp::synth
