@@ -69,6 +69,7 @@ const std::map<std::string, Target>& targets() {
       {"middlebury", {"in_par.txt", [](const std::string& p) { read_middlebury_par(p); }}},
       {"pmatrix", {"in.txt", [](const std::string& p) { read_projection_matrix(p, 640, 480, "c"); }}},
       {"stereo_calib", {"calib.txt", [](const std::string& p) { read_middlebury_stereo_calib(p); }}},
+      {"dome_calib", {"calib.txt", [](const std::string& p) { read_dome_calibration(p, 1024, 768); }}},
       // COLMAP: the input holds cameras.txt and images.txt, split at the first line "%%"
       {"colmap", {"colmap.txt", [](const std::string& p) {
                     std::ifstream in(p, std::ios::binary);

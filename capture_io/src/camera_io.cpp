@@ -88,6 +88,47 @@ std::vector<Camera> read_middlebury_par(const std::string& path, int width, int 
   return cams;
 }
 
+std::vector<Camera> read_dome_calibration(const std::string& path, int width, int height) {
+  if (width <= 0 || height <= 0)
+    throw InvalidInput("[tbsp::read_dome_calibration] " + path + ": the image size " + std::to_string(width) + "x" + std::to_string(height) +
+                       " is not positive (the file does not store it: 1024x768 for the WD2 / lkB sets)");
+  auto tb = detail::TextBuffer::load(path);
+  std::vector<Camera> cams;
+  std::vector<long long> seen;
+  for (;;) {
+    tb.skipSpace();
+    if (tb.atEnd()) break;
+    const long long idx = tb.readInt("the camera index opening a block (index, K, k1 k2, [R|t])");
+    const int line = tb.line();
+    if (idx < 0 || idx > 100000) tb.fail("camera index " + std::to_string(idx) + " is not plausible (expected 0..100000)");
+    for (long long s : seen)
+      if (s == idx) tb.fail("camera index " + std::to_string(idx) + " appears twice");
+    seen.push_back(idx);
+    const std::string name = "cam" + std::to_string(idx);
+    double v[23];
+    for (int k = 0; k < 23; ++k) {
+      const char* what = k < 9 ? "K entry" : (k < 11 ? "distortion coefficient" : (k % 4 == 2 ? "t entry" : "R entry"));
+      v[k] = tb.readDouble(std::string(what) + " of camera " + std::to_string(idx) + " (a block: index, K 3x3, k1 k2, [R|t] 3x4)");
+    }
+    Eigen::Matrix3d K, R;
+    K << v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8];
+    R << v[11], v[12], v[13], v[15], v[16], v[17], v[19], v[20], v[21];
+    const Eigen::Vector3d t(v[14], v[18], v[22]);
+    Distortion d;
+    d.k1 = v[9];
+    d.k2 = v[10];
+    cams.push_back(checked_camera(tb, line, [&] {
+      // printed with 6 decimals: re-orthonormalise that round-off (not a rotation at all: let Camera report it)
+      Eigen::JacobiSVD<Eigen::Matrix3d> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      Eigen::Matrix3d Rn = svd.matrixU() * svd.matrixV().transpose();
+      if ((Rn - R).norm() > 1e-4) Rn = R;
+      return Camera(name, width, height, K, Rn, t, d);
+    }));
+  }
+  if (cams.empty()) throw FileError(path + ": no camera (expected blocks of: index, K 3x3, k1 k2, [R|t] 3x4)");
+  return cams;
+}
+
 void write_middlebury_par(const std::string& path, const std::vector<Camera>& cams) {
   std::ostringstream os;
   os << cams.size() << "\n";

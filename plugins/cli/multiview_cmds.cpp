@@ -26,9 +26,11 @@
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/multiview/marker_animation.h"
 #include "tbsp/multiview/model_guided_stereo.h"
 #include "tbsp/multiview/silhouette_refinement.h"
 #include "tbsp/multiview/stereo_depth_fusion.h"
+#include "tbsp/plugins/marker_map_json.h"
 #include "tbsp/plugins/preview_render.h"
 
 namespace fs = std::filesystem;
@@ -341,16 +343,25 @@ std::string mesh_pattern(const std::string& meshes, int first, int last) {
 }
 
 struct RefineSilhouetteArgs {
-  std::string studio, meshes, out, frames;
+  std::string studio, meshes, out, frames, tmpl, pose;
   SilhouetteRefinementOptions o;
-  bool quiet = false;
+  Eigen::Index tets = 5000;
+  bool quiet = false, overlays = false;
 };
 
 void add_refine_silhouette(CLI::App& app, RefineSilhouetteArgs& a, CLI::App*& sub) {
   sub = app.add_subcommand("refine-silhouette", "refine posed meshes to the studio's silhouettes (thesis §6.3.1-2, docs/silhouette_refinement.md)");
   sub->add_option("studio", a.studio, "studio.yaml (or its folder) with silhouettes")->required();
-  sub->add_option("--meshes", a.meshes, "posed mesh per frame: a pattern with %d / %04d, or a folder holding FFFF.ply")->required();
-  sub->add_option("--out", a.out, "output folder: refined_FFFF.ply + silhouette_report.json")->required();
+  auto* meshes = sub->add_option("--meshes", a.meshes, "posed mesh per frame: a pattern with %d / %04d, or a folder holding FFFF.ply");
+  auto* pose = sub->add_option("--pose", a.pose,
+                               "instead of --meshes: pose --template by the hand-placed markers of this JSON (marker map with \"pixels\" per "
+                               "camera, triangulated; one frame), then refine (docs/silhouette_refinement.md)");
+  sub->add_option("--template", a.tmpl, "template mesh for --pose (default: the studio's template)")->needs(pose);
+  sub->add_option("--tets", a.tets, "control tetrahedra of the --pose deformation (default 5000)")->needs(pose)->check(CLI::Range(100, 1000000));
+  meshes->excludes(pose);
+  sub->add_option("--out", a.out, "output folder: refined_FFFF.ply + silhouette_report.json (+ posed_FFFF.ply with --pose)")->required();
+  sub->add_flag("--overlays", a.overlays, "write overlay_FFFF_before.png / _after.png: the mesh on every view (green: agrees with the silhouette, "
+                                          "blue: mesh only, red: silhouette only)");
   sub->add_option("--frames", a.frames, "frames a:b (inclusive) or one frame; default all");
   sub->add_flag("--lines", a.o.line_constraints, "line constraints (§6.3.2) instead of back-projected points (§6.3.1)");
   sub->add_option("--weight", a.o.weight, "constraint weight (default 0.35; thesis 0.25-0.5)");
@@ -359,25 +370,77 @@ void add_refine_silhouette(CLI::App& app, RefineSilhouetteArgs& a, CLI::App*& su
   sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
 }
 
+// --pose: the template posed by triangulated hand-placed markers (MarkerAnimation, one frame).
+struct PosedTemplate {
+  TriMesh mesh;
+  nlohmann::json report;
+};
+PosedTemplate pose_template(const RefineSilhouetteArgs& a, const Studio& st) {
+  const std::string tpath = a.tmpl.empty() ? (st.template_mesh.empty() ? "" : st.resolve(st.template_mesh)) : a.tmpl;
+  if (tpath.empty()) throw InvalidInput("--pose needs a template: give --template T (the studio " + a.studio + " names none)");
+  const TriMesh tmpl = read_mesh(tpath);
+  const MarkerMap map = load_marker_map(a.pose);
+  if (map.image_markers.size() < 3)
+    throw FileError(a.pose + ": " + std::to_string(map.image_markers.size()) +
+                    " markers have \"pixels\": --pose needs at least 3 markers placed in the images (\"pixels\": {\"CAMERA\": [x, y], ...})");
+  MarkerAnimationOptions mo;
+  mo.tets = a.tets;
+  PosedTemplate out;
+  ImagePoseReport pr;
+  try {
+    out.mesh = pose_template_to_image_markers(tmpl, map.markers, map.image_markers, st.cameraList(), mo, rigid_region_vertices(map, tmpl), &pr);
+  } catch (const InvalidInput& e) {
+    throw FileError(a.pose + ": " + e.what());
+  }
+  const auto& tri = pr.markers;
+  const auto& r = pr.animation;
+  nlohmann::json mk = nlohmann::json::array();
+  for (const auto& t : tri)
+    mk.push_back({{"marker", t.marker}, {"views", t.views}, {"rms_px", t.rms_px}, {"position", {t.position.x(), t.position.y(), t.position.z()}}});
+  out.report = {{"template", tpath},
+                {"markers", mk},
+                {"alignment_scale", r.scale},
+                {"alignment_rms", r.alignment_rms},
+                {"tets", r.tets},
+                {"median_residual", r.frames.front().median_residual},
+                {"max_residual", r.frames.front().max_residual},
+                {"seconds", r.seconds_setup + r.frames.front().seconds_deform + r.frames.front().seconds_transfer}};
+  return out;
+}
+
 int cmd_refine_silhouette(const RefineSilhouetteArgs& a) {
   const Studio st = read_studio(a.studio);
-  const auto [first, last] = parse_frames(a.frames, st);
+  auto [first, last] = parse_frames(a.frames, st);
   for (const auto& c : st.cameras)
     if (c.silhouettes.empty())
       throw InvalidInput("camera '" + c.camera.name() + "' of " + a.studio + " has no silhouettes: silhouette refinement needs them for every camera");
+  if (a.meshes.empty() && a.pose.empty()) throw InvalidInput("give the posed meshes (--meshes) or a template and its hand-placed markers (--pose)");
+  if (!a.pose.empty() && first != last) {
+    if (!a.frames.empty()) throw InvalidInput("--pose places markers in one frame: give --frames with one frame (not " + a.frames + ")");
+    last = first;
+  }
   SilhouetteRefinement sr;
   sr.setOptions(a.o);
-  const std::string pattern = mesh_pattern(a.meshes, first, last);
+  PosedTemplate posed;
+  if (!a.pose.empty()) posed = pose_template(a, st);
+  const std::string pattern = a.pose.empty() ? mesh_pattern(a.meshes, first, last) : "";
   fs::create_directories(a.out);
+  if (!a.pose.empty()) write_mesh((fs::path(a.out) / ("posed_" + expand_frame_pattern("%04d", first) + ".ply")).string(), posed.mesh);
   nlohmann::json frames = nlohmann::json::array();
   const auto t0 = Clock::now();
   for_each_frame(st, first, last, true, a.quiet, [&](const StudioFrame& fr, const ProgressCallback& progress, ProgressBar& bar) {
     sr.setProgressCallback(progress);
     sr.setInputFrame(st.cameraList(), fr.silhouettes, fr.frame);
-    sr.setInputMesh(read_mesh(expand_frame_pattern(pattern, fr.frame)));
+    const TriMesh input = a.pose.empty() ? read_mesh(expand_frame_pattern(pattern, fr.frame)) : posed.mesh;
+    sr.setInputMesh(input);
     TriMesh refined;
     sr.refine(refined);
-    write_mesh((fs::path(a.out) / ("refined_" + expand_frame_pattern("%04d", fr.frame) + ".ply")).string(), refined);
+    const std::string ff = expand_frame_pattern("%04d", fr.frame);
+    write_mesh((fs::path(a.out) / ("refined_" + ff + ".ply")).string(), refined);
+    if (a.overlays) {
+      write_png((fs::path(a.out) / ("overlay_" + ff + "_before.png")).string(), overlay_grid(input, st.cameraList(), fr));
+      write_png((fs::path(a.out) / ("overlay_" + ff + "_after.png")).string(), overlay_grid(refined, st.cameraList(), fr));
+    }
     const auto& r = sr.report();
     nlohmann::json views = nlohmann::json::array();
     for (const auto& v : r.views)
@@ -390,8 +453,9 @@ int cmd_refine_silhouette(const RefineSilhouetteArgs& a) {
     std::cout << "frame " << fr.frame << ": silhouette mismatch " << r.xor_before << " -> " << r.xor_after << " pixels in " << r.iterations
               << " iterations, " << r.seconds << " s\n";
   });
-  write_text_file_atomic((fs::path(a.out) / "silhouette_report.json").string(),
-                         nlohmann::json({{"studio", a.studio}, {"frames", frames}, {"seconds", seconds_since(t0)}}).dump(2) + "\n");
+  nlohmann::json report = {{"studio", a.studio}, {"frames", frames}, {"seconds", seconds_since(t0)}};
+  if (!a.pose.empty()) report["pose"] = posed.report;
+  write_text_file_atomic((fs::path(a.out) / "silhouette_report.json").string(), report.dump(2) + "\n");
   return 0;
 }
 

@@ -4,9 +4,11 @@
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "tbsp/core/error.h"
 #include "tbsp/io/atomic_file.h"
+#include "tbsp/multiview/rasterizer.h"
 
 namespace fs = std::filesystem;
 
@@ -57,6 +59,59 @@ void write_png(const std::string& path, const cv::Mat& m) {
     fs::rename(t, tmp);
     return true;
   });
+}
+
+// All views of one frame in a grid, each cropped to the performer: where mesh and silhouette
+// agree the camera image is tinted green; mesh outside the silhouette is blue, silhouette the
+// mesh misses is red.
+cv::Mat overlay_grid(const TriMesh& mesh, const std::vector<Camera>& cams, const StudioFrame& fr) {
+  RasterOptions ro;
+  ro.barycentrics = false;
+  const std::vector<RenderBuffers> buf = Rasterizer(ro).renderViews(mesh, cams);
+  const int n = int(cams.size()), cols = std::min(n, 4), rows = (n + cols - 1) / cols;
+  const int w = 300, h = 400;
+  cv::Mat grid(rows * h, cols * w, CV_8UC3, cv::Scalar(40, 40, 40));
+  for (int k = 0; k < n; ++k) {
+    const Camera& cam = cams[std::size_t(k)];
+    cv::Mat img;
+    const cv::Mat& src = fr.images[std::size_t(k)];
+    if (src.empty()) img = cv::Mat(cam.height(), cam.width(), CV_8UC3, cv::Scalar(0, 0, 0));
+    else if (src.channels() == 1) cv::cvtColor(src, img, cv::COLOR_GRAY2BGR);
+    else img = src.clone();
+    const RenderBuffers& b = buf[std::size_t(k)];
+    const cv::Mat& sil = fr.silhouettes[std::size_t(k)];
+    // The crop: the mesh's box, and the silhouette near it (within a quarter of the box's size:
+    // segmentation specks elsewhere in the image do not shrink the performer to a dot).
+    cv::Rect mesh_box, sil_box;
+    for (int y = 0; y < img.rows; ++y)
+      for (int x = 0; x < img.cols; ++x)
+        if (b.mask[std::size_t(y) * b.width + x] != 0) mesh_box |= cv::Rect(x, y, 1, 1);
+    const cv::Rect near = mesh_box.area() == 0 ? cv::Rect(0, 0, img.cols, img.rows)
+                                               : cv::Rect(mesh_box.x - mesh_box.width / 4, mesh_box.y - mesh_box.height / 4,
+                                                          mesh_box.width * 3 / 2, mesh_box.height * 3 / 2);
+    for (int y = 0; y < img.rows; ++y)
+      for (int x = 0; x < img.cols; ++x) {
+        const bool m = b.mask[std::size_t(y) * b.width + x] != 0, s = sil.at<uchar>(y, x) >= 128;
+        if (!m && !s) continue;
+        if (s && near.contains(cv::Point(x, y))) sil_box |= cv::Rect(x, y, 1, 1);
+        cv::Vec3b& p = img.at<cv::Vec3b>(y, x);
+        if (m && s) p = cv::Vec3b(uchar(p[0] * 0.7), uchar(p[1] * 0.7 + 60), uchar(p[2] * 0.7));
+        else p = m ? cv::Vec3b(255, 80, 0) : cv::Vec3b(0, 0, 255);
+      }
+    cv::Rect box = mesh_box | sil_box;
+    if (box.area() == 0) box = cv::Rect(0, 0, img.cols, img.rows);
+    // crop with the panel's aspect ratio around the performer, 8 % margin
+    const double bw = box.width * 1.16, bh = box.height * 1.16, scale = std::max(bw / w, bh / h);
+    const cv::Point2d c(box.x + box.width / 2.0, box.y + box.height / 2.0);
+    const cv::Rect crop = cv::Rect(int(c.x - scale * w / 2), int(c.y - scale * h / 2), int(scale * w), int(scale * h)) & cv::Rect(0, 0, img.cols, img.rows);
+    cv::Mat panel(h, w, CV_8UC3, cv::Scalar(40, 40, 40)), small;
+    const double f = std::min(double(w) / crop.width, double(h) / crop.height);
+    cv::resize(img(crop), small, cv::Size(std::max(1, int(crop.width * f)), std::max(1, int(crop.height * f))), 0, 0, cv::INTER_AREA);
+    small.copyTo(panel(cv::Rect((w - small.cols) / 2, (h - small.rows) / 2, small.cols, small.rows)));
+    cv::putText(panel, cam.name(), cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1);
+    panel.copyTo(grid(cv::Rect((k % cols) * w, (k / cols) * h, w, h)));
+  }
+  return grid;
 }
 
 }  // namespace tbsp::cli

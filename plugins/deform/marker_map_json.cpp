@@ -19,16 +19,36 @@ MarkerMap load_marker_map(const std::string& path) try {
     const std::string w = "markers[" + std::to_string(i) + "]";
     const auto& j = a[i];
     if (!j.is_object()) in.fail(w, "expected an object {\"marker\": NAME, \"vertex\": INDEX}");
-    in.check_keys(j, {"marker", "vertex", "align", "comment"}, w);
+    in.check_keys(j, {"marker", "vertex", "point", "align", "pixels", "comment"}, w);
     MarkerMapEntry e;
     if (!j.contains("marker") || !j["marker"].is_string()) in.fail(w + ".marker", "missing: expected the marker's label (a string)");
     e.marker = j["marker"].get<std::string>();
     if (e.marker.empty()) in.fail(w + ".marker", "is empty");
-    if (!j.contains("vertex")) in.fail(w + ".vertex", "missing: expected the template vertex the marker sits on");
-    const long long v = in.integer(j["vertex"], w + ".vertex");
-    if (v < 0 || v > 2000000000LL) in.fail(w + ".vertex", "template vertex " + std::to_string(v) + " does not exist");
-    e.vertex = static_cast<int>(v);
+    if (j.contains("vertex") && j.contains("point")) in.fail(w, "give either \"vertex\" (a template vertex) or \"point\" (a point inside the template), not both");
+    if (j.contains("point")) {
+      e.point = in.vec3(j["point"], w + ".point");
+    } else {
+      if (!j.contains("vertex")) in.fail(w + ".vertex", "missing: expected the template vertex the marker sits on (or a \"point\" inside the template)");
+      const long long v = in.integer(j["vertex"], w + ".vertex");
+      if (v < 0 || v > 2000000000LL) in.fail(w + ".vertex", "template vertex " + std::to_string(v) + " does not exist");
+      e.vertex = static_cast<int>(v);
+    }
     if (j.contains("align")) e.align = in.boolean(j["align"], w + ".align");
+    for (std::size_t k = 0; k < i; ++k)
+      if (out[k].marker == e.marker) in.fail(w + ".marker", "'" + e.marker + "' is mapped twice (also markers[" + std::to_string(k) + "])");
+    if (j.contains("pixels")) {
+      const auto& px = j["pixels"];
+      if (!px.is_object() || px.empty()) in.fail(w + ".pixels", "expected an object {\"CAMERA\": [x, y], ...} with at least 2 cameras");
+      ImageMarker im;
+      im.marker = e.marker;
+      for (auto it = px.begin(); it != px.end(); ++it) {
+        const std::string wp = w + ".pixels." + it.key();
+        if (!it.value().is_array() || it.value().size() != 2) in.fail(wp, "expected a pixel [x, y]");
+        im.pixels[it.key()] = Eigen::Vector2d(in.number(it.value()[0], wp + "[0]"), in.number(it.value()[1], wp + "[1]"));
+      }
+      if (im.pixels.size() < 2) in.fail(w + ".pixels", "the marker is placed in 1 view: place it in at least 2 (it is triangulated)");
+      map.image_markers.push_back(im);
+    }
     out.push_back(e);
   }
   if (doc.contains("rigid_regions")) {

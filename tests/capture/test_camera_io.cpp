@@ -142,6 +142,46 @@ TEST(CameraIo, MalformedFilesGiveClearErrors) {
   EXPECT_NE(error_of([&] { read_colmap_text(cm.string()); }).find("no such file"), std::string::npos);
 }
 
+// The Tsinghua dome format (WD2 / lkB calibParamsI.txt): index, K with skew, k1 k2, [R|t].
+TEST(CameraIo, DomeCalibrationReadsBlocksAndNamesErrors) {
+  const auto dir = test::temp_dir("domecal");
+  const std::string b0 = "0\n900 -1.5 520\n0.0 898 384\n0 0 1\n-0.04 0.06\n1 0 0 0\n0 1 0 0\n0 0 1 0\n\n";
+  const std::string b1 = "1\n899 -1.0 506\n0.0 898 395\n0 0 1\n-0.03 0.05\n0 0 1 -7.5\n0 1 0 0.1\n-1 0 0 1.5\n\n";
+  write(dir / "ok.txt", b0 + b1);
+  const auto cams = read_dome_calibration((dir / "ok.txt").string(), 1024, 768);
+  ASSERT_EQ(cams.size(), 2u);
+  EXPECT_EQ(cams[0].name(), "cam0");
+  EXPECT_EQ(cams[1].name(), "cam1");
+  EXPECT_DOUBLE_EQ(cams[0].K()(0, 1), -1.5);  // skew kept
+  EXPECT_DOUBLE_EQ(cams[1].distortion().k1, -0.03);
+  EXPECT_DOUBLE_EQ(cams[1].distortion().k2, 0.05);
+  EXPECT_DOUBLE_EQ(cams[1].t().x(), -7.5);
+  EXPECT_NEAR((cams[1].R() - (Eigen::Matrix3d() << 0, 0, 1, 0, 1, 0, -1, 0, 0).finished()).norm(), 0, 1e-12);
+  // A world point on camera 0's axis projects to its principal point (no distortion there).
+  EXPECT_NEAR((cams[0].project({0, 0, 5}) - Eigen::Vector2d(520, 384)).norm(), 0, 1e-9);
+
+  struct Case { const char* name; std::string text; const char* expect; };
+  const Case bad[] = {
+      {"empty", "\n", "no camera"},
+      {"index", "zero\n", "camera index"},
+      {"trunc", "0\n900 0 520\n0 898 384\n0 0 1\n-0.04\n", "distortion coefficient of camera 0"},
+      {"word", "0\n900 0 520\n0 898 384\n0 0 1\n-0.04 0.06\n1 0 0 0\n0 1 0 x\n0 0 1 0\n", "t entry of camera 0"},
+      {"twice", b0 + b0, "appears twice"},
+      {"notrot", "0\n900 0 520\n0 898 384\n0 0 1\n0 0\n2 0 0 0\n0 1 0 0\n0 0 1 0\n", "not a rotation"},
+      {"focal", "0\n-900 0 520\n0 898 384\n0 0 1\n0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n", "cam0"},
+      {"negative", "-3\n", "not plausible"},
+  };
+  for (const Case& c : bad) {
+    const auto f = dir / (std::string(c.name) + ".txt");
+    write(f, c.text);
+    const std::string e = error_of([&] { read_dome_calibration(f.string(), 1024, 768); });
+    EXPECT_NE(e.find(f.string()), std::string::npos) << c.name << ": " << e;
+    EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
+  }
+  EXPECT_THROW(read_dome_calibration((dir / "ok.txt").string(), 0, 768), InvalidInput);
+  EXPECT_NE(error_of([&] { read_dome_calibration((dir / "missing.txt").string(), 1024, 768); }).find("missing.txt"), std::string::npos);
+}
+
 TEST(CameraIo, MiddleburyStereoCalibReadsThe2014Format) {
   const auto dir = test::temp_dir("mbcalib");
   const auto p = (dir / "calib.txt").string();

@@ -123,3 +123,23 @@ TEST(DancerReal, EightProjectionMatricesDecompose) {
     EXPECT_LT(c.K()(0, 0), 3000);
   }
 }
+
+TEST(DomeReal, Wd2TwentyCamerasOnARing) {
+  const std::string f = test::shared("capture/wl-zhao__VisualHull/calibParamsI.txt");
+  TBSP_REQUIRE_FILE(f);
+  const auto cams = read_dome_calibration(f, 1024, 768);
+  ASSERT_EQ(cams.size(), 20u);
+  // Manifest facts: camera 0 is [I|0]; f ~ 895-902 px; centres on a ring of radius ~22 units.
+  EXPECT_NEAR(cams[0].center().norm(), 0, 1e-9);
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& c : cams) mean += c.center() / 20.0;
+  for (const auto& c : cams) {
+    EXPECT_GT(c.K()(0, 0), 890) << c.name();
+    EXPECT_LT(c.K()(0, 0), 905) << c.name();
+    EXPECT_NEAR((c.center() - mean).norm(), 22, 3) << c.name();
+    EXPECT_LT(c.distortion().k1, 0) << c.name();  // barrel, k1 ~ -0.04
+    // The subject stands near the ring's centre, in front of every camera.
+    EXPECT_GT(c.depth(mean), 0) << c.name();
+  }
+}
+

@@ -12,6 +12,8 @@
 #include "cli_util.h"
 #include "test_util.h"
 #include "tbsp/io/cloud_io.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/io/studio.h"
 
 using namespace tbsp;
 namespace fs = std::filesystem;
@@ -131,3 +133,49 @@ TEST(CliStereo, RefineSilhouetteKeepsAMatchingMeshAndRefusesBadOptions) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("weight"), std::string::npos) << r.err;
 }
+
+// --pose: the studio's template posed by markers placed in the images (here: the ground-truth
+// positions of 12 template vertices projected into 3 of the 6 views), then refined.
+TEST(CliStereo, RefineSilhouettePosesTheTemplateFromImageMarkers) {
+  const auto dir = test::temp_dir("cli_refine_sil_pose");
+  const std::string st = (dir / "studio").string(), out = (dir / "out").string();
+  auto r = run("synth-studio -q --out " + st + " --cameras 6 --width 400 --height 400 --frames 1 --detail 0", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Studio studio = read_studio(st + "/studio.yaml");
+  const TriMesh tmpl = read_mesh(studio.resolve(studio.template_mesh)), gt = read_mesh(studio.groundTruthPath(0));
+  nlohmann::json markers = nlohmann::json::array();
+  const std::vector<int> vs = test::farthest_points(tmpl.V, 12);
+  for (std::size_t k = 0; k < vs.size(); ++k) {
+    nlohmann::json px = nlohmann::json::object();
+    for (std::size_t c = k % 2; c < studio.cameras.size(); c += 2) {
+      const Eigen::Vector2d p = studio.cameras[c].camera.project(gt.V.row(vs[k]).transpose());
+      px[studio.cameras[c].camera.name()] = {p.x(), p.y()};
+    }
+    markers.push_back({{"marker", "m" + std::to_string(k)}, {"vertex", vs[k]}, {"pixels", px}});
+  }
+  const std::string pose = (dir / "pose.json").string();
+  std::ofstream(pose) << nlohmann::json({{"markers", markers}}).dump(1);
+  r = run("refine-silhouette " + st + " --pose " + pose + " --tets 2000 --overlays --out " + out + " -q", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const char* f : {"posed_0000.ply", "refined_0000.ply", "overlay_0000_before.png", "overlay_0000_after.png"})
+    EXPECT_TRUE(fs::exists(out + "/" + f)) << f;
+  EXPECT_FALSE(cv::imread(out + "/overlay_0000_after.png").empty());
+  const auto rep = test::load_json(out + "/silhouette_report.json");
+  ASSERT_EQ(rep["pose"]["markers"].size(), 12u);
+  for (const auto& m : rep["pose"]["markers"]) EXPECT_LT(m["rms_px"].get<double>(), 0.01);  // exact projections
+  double iou = 0;
+  for (const auto& v : rep["frames"][0]["views"]) iou += v["iou_after"].get<double>() / 6.0;
+  EXPECT_GE(iou, 0.9);
+
+  // Bad input: --pose with --meshes, several frames, a marker in one view (named with the file).
+  r = run("refine-silhouette " + st + " --pose " + pose + " --meshes " + st + "/gt --out " + out + " -q", dir);
+  EXPECT_NE(r.code, 0);
+  markers[3]["pixels"] = {{studio.cameras[0].camera.name(), {10, 10}}};
+  std::ofstream(pose) << nlohmann::json({{"markers", markers}}).dump(1);
+  r = run("refine-silhouette " + st + " --pose " + pose + " --out " + out + " -q", dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("pose.json"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("markers[3].pixels"), std::string::npos) << r.err;
+  EXPECT_TRUE(fs::exists(out + "/refined_0000.ply"));  // the good output of the first run is still there
+}
+

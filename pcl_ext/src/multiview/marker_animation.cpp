@@ -35,7 +35,8 @@ struct MarkerAnimation::Deformer {
 };
 
 struct MarkerAnimation::Impl {
-  DeformationTransfer transfer, tracked;
+  DeformationTransfer transfer, tracked, points;
+  Eigen::MatrixX3d rest;  ///< per map entry: rest position (aligned frame)
   std::map<std::vector<int>, std::unique_ptr<Deformer>> deformers;
   int last_frame = -1;
   const Deformer* last = nullptr;
@@ -92,13 +93,22 @@ void MarkerAnimation::start() {
       throw InvalidInput(who + "the marker map names '" + map_[k].marker + "', which the trajectories do not have (they have " +
                          std::to_string(names_.size()) + " markers, e.g. '" + names_.front() + "'): fix the name or remove the entry");
     column_[k] = static_cast<int>(it - names_.begin());
-    if (map_[k].vertex < 0 || map_[k].vertex >= surface_.V.rows())
+    if (map_[k].vertex == -1) {
+      if (!map_[k].point.allFinite())
+        throw InvalidInput(who + "marker '" + map_[k].marker + "' has neither a template vertex nor a finite point: give one of them");
+    } else if (map_[k].vertex < 0 || map_[k].vertex >= surface_.V.rows()) {
       throw InvalidInput(who + "marker '" + map_[k].marker + "' maps to vertex " + std::to_string(map_[k].vertex) + ", but the template has " +
                          std::to_string(surface_.V.rows()) + " vertices");
+    }
     for (std::size_t j = 0; j < k; ++j)
       if (map_[j].marker == map_[k].marker) throw InvalidInput(who + "marker '" + map_[k].marker + "' is mapped twice");
   }
   auto present = [&](int f, std::size_t k) { return data_.block<1, 3>(f, 3 * column_[k]).allFinite(); };
+  // Rest positions of the map entries (template frame; aligned below with the surface).
+  Eigen::MatrixX3d& rest = impl_->rest;
+  rest.resize(Eigen::Index(map_.size()), 3);
+  for (std::size_t k = 0; k < map_.size(); ++k)
+    rest.row(Eigen::Index(k)) = map_[k].vertex >= 0 ? Eigen::RowVector3d(surface_.V.row(map_[k].vertex)) : Eigen::RowVector3d(map_[k].point.transpose());
 
   report_ = MarkerAnimationReport{};
   report_progress(progress_, 0.0, "tetrahedralize");
@@ -154,7 +164,7 @@ void MarkerAnimation::start() {
       if (map_[k].align && present(f0, k)) use.push_back(k);
     Eigen::Matrix3Xd src(3, use.size()), dst(3, use.size());
     for (std::size_t i = 0; i < use.size(); ++i) {
-      src.col(Eigen::Index(i)) = surface_.V.row(map_[use[i]].vertex).transpose();
+      src.col(Eigen::Index(i)) = rest.row(Eigen::Index(use[i])).transpose();
       dst.col(Eigen::Index(i)) = data_.block<1, 3>(f0, 3 * column_[use[i]]).transpose();
     }
     const Eigen::Matrix4d S = Eigen::umeyama(src, dst, true);
@@ -170,6 +180,7 @@ void MarkerAnimation::start() {
     const Eigen::RowVector3d t = S.block<3, 1>(0, 3).transpose();
     surface_.V = (surface_.V * A.transpose()).rowwise() + t;
     tets_.V = (tets_.V * A.transpose()).rowwise() + t;
+    rest = (rest * A.transpose()).rowwise() + t;
   }
   report_progress(progress_, 0.0, "transfer");
   DeformationTransferOptions to;
@@ -184,6 +195,8 @@ void MarkerAnimation::start() {
     impl_->tracked.setOptions(to);
     impl_->tracked.precompute(tets_, (tracked_rest_ * A.transpose()).rowwise() + t);
   }
+  impl_->points.setOptions(to);
+  impl_->points.precompute(tets_, rest);  // the map entries' positions for the residuals (interior points)
   impl_->deformers.clear();
   impl_->last = nullptr;
   report_.tet_vertices = tets_.V.rows();
@@ -210,7 +223,7 @@ MarkerAnimation::Deformer& MarkerAnimation::deformerFor(const std::vector<int>& 
   D->d.setMesh(tets_);
   for (const auto& r : rigid_tets_) D->d.addRigidRegion(r);
   for (int k : entries) {
-    const Eigen::Vector3d p = surface_.V.row(map_[std::size_t(k)].vertex).transpose();
+    const Eigen::Vector3d p = impl_->rest.row(k).transpose();
     D->d.addPointHandle(p, p);
   }
   ++report_.deformers_built;
@@ -263,10 +276,15 @@ bool MarkerAnimation::next(TriMesh& out) {
   m.V = impl_->transfer.apply(X);
   if (tracked_rest_.rows() > 0) tracked_ = impl_->tracked.apply(X);
   fr.seconds_transfer = seconds_since(t1);
+  bool interior = false;
+  for (int k : entries) interior = interior || map_[std::size_t(k)].vertex < 0;
+  const Eigen::MatrixX3d P = interior ? impl_->points.apply(X) : Eigen::MatrixX3d();
   std::vector<double> res;
   res.reserve(entries.size());
-  for (int k : entries)
-    res.push_back((m.V.row(map_[std::size_t(k)].vertex) - data_.block<1, 3>(f, 3 * column_[std::size_t(k)])).norm());
+  for (int k : entries) {
+    const Eigen::RowVector3d at = map_[std::size_t(k)].vertex >= 0 ? Eigen::RowVector3d(m.V.row(map_[std::size_t(k)].vertex)) : Eigen::RowVector3d(P.row(k));
+    res.push_back((at - data_.block<1, 3>(f, 3 * column_[std::size_t(k)])).norm());
+  }
   std::sort(res.begin(), res.end());
   fr.median_residual = res[res.size() / 2];
   fr.max_residual = res.back();
@@ -275,6 +293,71 @@ bool MarkerAnimation::next(TriMesh& out) {
   out = std::move(m);
   report_progress(progress_, double(next_frame_) / double(data_.rows()), "frames");  // may throw Cancelled: the frame is out already
   return true;
+}
+
+std::vector<TriangulatedMarker> triangulate_image_markers(const std::vector<Camera>& cameras, const std::vector<ImageMarker>& markers) {
+  const std::string who = "[tbsp::triangulate_image_markers] ";
+  std::string known;
+  for (const auto& c : cameras) known += (known.empty() ? "" : ", ") + c.name();
+  std::vector<TriangulatedMarker> out;
+  for (const auto& m : markers) {
+    std::vector<Camera> cams;
+    std::vector<Eigen::Vector2d> px;
+    for (const auto& [name, p] : m.pixels) {
+      const auto it = std::find_if(cameras.begin(), cameras.end(), [&](const Camera& c) { return c.name() == name; });
+      if (it == cameras.end())
+        throw InvalidInput(who + "marker '" + m.marker + "' has a pixel in camera '" + name + "', which is not one of the cameras (" + known + ")");
+      if (!p.allFinite()) throw InvalidInput(who + "marker '" + m.marker + "': its pixel in camera '" + name + "' is not finite");
+      cams.push_back(*it);
+      px.push_back(p);
+    }
+    if (cams.size() < 2)
+      throw InvalidInput(who + "marker '" + m.marker + "' is seen in " + std::to_string(cams.size()) +
+                         " camera(s): place it in at least 2 views (3 or more, far apart, triangulate better)");
+    TriangulatedMarker t;
+    t.marker = m.marker;
+    t.position = triangulate(cams, px);
+    for (const auto& c : cams)
+      if (!(c.depth(t.position) > 0))
+        throw InvalidInput(who + "marker '" + m.marker + "' triangulates behind camera '" + c.name() + "': its pixels do not show one point; check them");
+    t.views = int(cams.size());
+    t.rms_px = reprojection_rms(cams, px, t.position);
+    out.push_back(t);
+  }
+  return out;
+}
+
+TriMesh pose_template_to_image_markers(const TriMesh& tmpl, const std::vector<MarkerMapEntry>& map, const std::vector<ImageMarker>& image_markers,
+                                       const std::vector<Camera>& cameras, const MarkerAnimationOptions& o,
+                                       const std::vector<std::vector<int>>& rigid, ImagePoseReport* report) {
+  const std::string who = "[tbsp::pose_template_to_image_markers] ";
+  if (image_markers.size() < 3)
+    throw InvalidInput(who + std::to_string(image_markers.size()) + " markers are placed in the images: place at least 3 (spread over the body)");
+  std::vector<TriangulatedMarker> tri = triangulate_image_markers(cameras, image_markers);
+  std::vector<MarkerMapEntry> entries;
+  std::vector<std::string> names;
+  Eigen::MatrixXd data(1, 3 * Eigen::Index(tri.size()));
+  for (std::size_t k = 0; k < tri.size(); ++k) {
+    const auto it = std::find_if(map.begin(), map.end(), [&](const MarkerMapEntry& e) { return e.marker == tri[k].marker; });
+    if (it == map.end())
+      throw InvalidInput(who + "image marker '" + tri[k].marker + "' has no template vertex or point in the map: add an entry for it");
+    entries.push_back(*it);
+    names.push_back(tri[k].marker);
+    data.block<1, 3>(0, 3 * Eigen::Index(k)) = tri[k].position.transpose();
+  }
+  MarkerAnimation anim;
+  anim.setOptions(o);
+  anim.setTemplate(tmpl);
+  anim.setMarkerMap(entries);
+  anim.setRigidRegions(rigid);
+  anim.setMarkers(names, data);
+  TriMesh out;
+  anim.next(out);
+  if (report) {
+    report->markers = std::move(tri);
+    report->animation = anim.report();
+  }
+  return out;
 }
 
 }  // namespace tbsp

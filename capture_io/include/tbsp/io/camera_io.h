@@ -53,4 +53,12 @@ RectifiedPairCalibration read_middlebury_stereo_calib(const std::string& path);
 Camera read_projection_matrix(const std::string& path, int width, int height, const std::string& name = "");
 void write_projection_matrix(const std::string& path, const Camera& camera);
 
+/// The Tsinghua dome calibration (`calibParamsI.txt` of the WD2 / lkB sets, 20 cameras): blocks
+/// of the camera index (an integer), K (3 rows of 3, with skew), two radial distortion
+/// coefficients k1 k2 (OpenCV's model on normalised coordinates) and [R | t] (3 rows of 4,
+/// world -> camera). Cameras are named "cam<index>". The file holds no image size: pass it
+/// (1024 x 768 for WD2 / lkB). Throws FileError ("FILE:LINE: ...") on a missing file, a
+/// missing or non-numeric entry, a repeated index, no camera, a non-rotation R or a bad K.
+std::vector<Camera> read_dome_calibration(const std::string& path, int width, int height);
+
 }  // namespace tbsp

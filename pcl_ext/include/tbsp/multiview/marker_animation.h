@@ -5,7 +5,8 @@
 /// the full-resolution surface follows by DeformationTransfer (§7.3).
 ///
 /// Setup (start()):
-/// 1. the marker map names, for each marker used, the template vertex it sits on;
+/// 1. the marker map names, for each marker used, the template vertex it sits on (or a point
+///    inside the template: a joint centre);
 /// 2. the template is aligned to the first frame by a similarity fit (Umeyama: rotation,
 ///    uniform scale, translation) of the mapped vertices with `align` set to their markers
 ///    (markers on parts whose pose differs from the template's — a raised arm — are left out
@@ -22,14 +23,17 @@
 /// in a frame (a gap: NaN) is dropped for that frame, not zeroed: the deformer for that set of
 /// present markers is built (one sparse Cholesky; up to 8 sets are kept) and iterated
 /// `start_iterations` times from the rest state the first time the set occurs. Residual =
-/// distance of each used marker to its vertex on the output surface.
+/// distance of each used marker to its vertex on the output surface (to its point carried by the
+/// transfer, for interior points).
 ///
 /// Units: those of the markers (C3D is usually mm). Errors (InvalidInput): a map entry naming a
-/// marker the trajectories do not have or a vertex the template does not have, fewer than 3
+/// marker the trajectories do not have or a vertex the template does not have (or, for
+/// vertex -1, a non-finite point), fewer than 3
 /// alignment markers present in the first frame, a rigid region naming a missing vertex or
 /// covering no tetrahedron, an invalid template or options.
 
 #include <Eigen/Core>
+#include <limits>
 #include <map>
 #include <memory>
 #include <string>
@@ -38,15 +42,40 @@
 #include "tbsp/core/progress.h"
 #include "tbsp/mesh/tet_mesh.h"
 #include "tbsp/mesh/tri_mesh.h"
+#include "tbsp/multiview/camera.h"
 
 namespace tbsp {
 
-/// One marker of the map: the template vertex it sits on.
+/// One marker of the map: the template vertex it sits on, or a point of the template's volume
+/// (a joint centre, for markers triangulated from image clicks: triangulate_image_markers).
 struct MarkerMapEntry {
   std::string marker;  ///< name in the trajectories (C3D/TRC label)
-  int vertex = -1;     ///< template surface vertex, 0..#V-1
+  int vertex = -1;     ///< template surface vertex, 0..#V-1; -1: the marker sits at `point`
   bool align = true;   ///< used by the first-frame similarity alignment
+  /// Used when vertex = -1: template rest coordinates of a point inside the closed template (a
+  /// TetDeformer point handle, §7.2.3); carried to the output by the transfer.
+  Eigen::Vector3d point = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
 };
+
+/// One marker observed in calibrated images (hand-placed clicks, detections): the pixels per
+/// camera name. triangulate_image_markers() turns a set of them into marker positions.
+struct ImageMarker {
+  std::string marker;
+  std::map<std::string, Eigen::Vector2d> pixels;  ///< camera name -> pixel (x right, y down)
+};
+/// A triangulated image marker.
+struct TriangulatedMarker {
+  std::string marker;
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  ///< world units of the cameras
+  int views = 0;                                       ///< observations used
+  double rms_px = 0;                                   ///< reprojection error over them, pixels
+};
+/// Triangulates each marker from its pixels (DLT + Gauss-Newton on the reprojection error,
+/// distortion respected: tbsp::triangulate). \throws InvalidInput naming the marker when it has
+/// fewer than 2 views, names a camera not in `cameras` (listing them), has a non-finite pixel, or
+/// triangulates behind a camera that sees it.
+std::vector<TriangulatedMarker> triangulate_image_markers(const std::vector<Camera>& cameras,
+                                                          const std::vector<ImageMarker>& markers);
 
 struct MarkerAnimationOptions {
   /// Target tetrahedron count of the control mesh when no tet mesh is given, >= 100 or 0 (=
@@ -148,5 +177,25 @@ private:
   std::unique_ptr<Impl> impl_;
   MarkerAnimationReport report_;
 };
+
+/// What pose_template_to_image_markers did.
+struct ImagePoseReport {
+  std::vector<TriangulatedMarker> markers;  ///< triangulated, in the order of `image_markers`
+  MarkerAnimationReport animation;          ///< alignment (scale, rms), control mesh, one frame (residuals, times)
+};
+
+/// Poses a template by markers placed in calibrated images (hand clicks, detections; thesis §6.2
+/// with markers from images): triangulates `image_markers` (triangulate_image_markers), then one
+/// MarkerAnimation frame — similarity alignment on the `align` entries, `o.start_iterations`
+/// TetDeformer iterations with a point handle per marker, transfer to the surface. `map` holds
+/// the template side of every image marker (by name: a vertex or an interior point); entries
+/// without pixels are ignored. `rigid`: optional rigid regions (template vertex sets).
+/// \returns the posed surface (the template's connectivity, the cameras' world frame and units).
+/// \throws InvalidInput (naming the marker) from the triangulation, for an image marker the map
+/// does not name, for fewer than 3 image markers, and from MarkerAnimation.
+TriMesh pose_template_to_image_markers(const TriMesh& tmpl, const std::vector<MarkerMapEntry>& map,
+                                       const std::vector<ImageMarker>& image_markers, const std::vector<Camera>& cameras,
+                                       const MarkerAnimationOptions& o = {}, const std::vector<std::vector<int>>& rigid = {},
+                                       ImagePoseReport* report = nullptr);
 
 }  // namespace tbsp
