@@ -80,6 +80,9 @@ void capture_rows(int frames, int size, const std::vector<int>& details) {
     std::printf("| %ld | %ld | %.2f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.3f | %.4f | %.2f |\n", long(rest.V.rows()), long(r.tets),
                 r.t_setup, median(t[0]), median(t[1]), median(t[2]), median(t[3]), median(t[4]), median(t[5]), median(t[6]),
                 100 * *std::max_element(err.begin(), err.end()), worst_iou, err.size() > 5 ? err.back() / err[5] : 0.0);
+    std::printf("\nper frame: mean vertex error (%% diag) / first-frame anchor matches:");
+    for (std::size_t k = 0; k < err.size(); ++k) std::printf("%s%.3f/%d", k % 10 ? " " : "\n  ", 100 * err[k], r.frames[k].anchor_matches);
+    std::printf("\n");
     std::fflush(stdout);
   }
 }

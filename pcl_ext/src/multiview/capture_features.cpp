@@ -121,4 +121,29 @@ int match_features(const LiftedFeatures& from, const ViewFeatures& to, const Tri
   return n;
 }
 
+LiftedFeatures facing_features(const std::vector<LiftedFeatures>& sets, const TriMesh& mesh, const Camera& cam, double min_cos) {
+  LiftedFeatures out;
+  std::vector<std::pair<std::size_t, int>> keep;
+  const Eigen::Vector3d C = cam.center();
+  for (std::size_t s = 0; s < sets.size(); ++s)
+    for (std::size_t i = 0; i < sets[s].face.size(); ++i) {
+      const int f = sets[s].face[i];
+      const Eigen::Vector3d a = mesh.V.row(mesh.F(f, 0)).transpose(), b = mesh.V.row(mesh.F(f, 1)).transpose(),
+                            c = mesh.V.row(mesh.F(f, 2)).transpose();
+      const Eigen::Vector3d nrm = (b - a).cross(c - a);
+      const Eigen::Vector3d to_cam = C - surface_point(mesh, f, sets[s].bary[i]);
+      const double d = nrm.norm() * to_cam.norm();
+      if (d > 0 && nrm.dot(to_cam) >= min_cos * d) keep.emplace_back(s, int(i));
+    }
+  if (keep.empty()) return out;
+  out.desc.create(int(keep.size()), sets[keep.front().first].desc.cols, CV_32F);
+  for (std::size_t r = 0; r < keep.size(); ++r) {
+    const auto& st = sets[keep[r].first];
+    out.face.push_back(st.face[std::size_t(keep[r].second)]);
+    out.bary.push_back(st.bary[std::size_t(keep[r].second)]);
+    st.desc.row(keep[r].second).copyTo(out.desc.row(int(r)));
+  }
+  return out;
+}
+
 }  // namespace tbsp::detail

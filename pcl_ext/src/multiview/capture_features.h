@@ -55,6 +55,10 @@ LiftedFeatures lift_features(const ViewFeatures& f, const RenderBuffers& buffers
 int match_features(const LiftedFeatures& from, const ViewFeatures& to, const TriMesh& mesh, const Camera& cam, double ratio,
                    double max_flow_px, std::vector<FeatureMatch>& out);
 
+/// The lifted keypoints of all `sets` whose surface point on `mesh` faces `cam` (the angle
+/// between the face normal and the direction to the camera below acos(min_cos)), pooled.
+LiftedFeatures facing_features(const std::vector<LiftedFeatures>& sets, const TriMesh& mesh, const Camera& cam, double min_cos);
+
 /// Position of a surface point on the mesh.
 inline Eigen::Vector3d surface_point(const TriMesh& m, int face, const Eigen::Vector3d& b) {
   return b(0) * m.V.row(m.F(face, 0)).transpose() + b(1) * m.V.row(m.F(face, 1)).transpose() + b(2) * m.V.row(m.F(face, 2)).transpose();

@@ -37,6 +37,7 @@ bool PerformanceCaptureOptions::isValid(std::string* why) const {
   if (max_features < 100 || max_features > 100000) return fail("max_features must be in 100..100000");
   if (!(ratio > 0) || ratio > 1) return fail("ratio must be in (0, 1]");
   if (!finite_pos(max_flow_px)) return fail("max_flow_px must be > 0");
+  if (!finite_pos(anchor_weight) || anchor_weight > 100) return fail("anchor_weight must be in (0, 100]");
   if (!(silhouette_weight > 0) || silhouette_weight > 10) return fail("silhouette_weight must be in (0, 10]");
   if (!finite_pos(search_px)) return fail("search_px must be > 0");
   if (key_handles < 1 || key_handles > 100) return fail("key_handles must be in 1..100");
@@ -180,6 +181,7 @@ namespace {
 struct FrameMatches {
   int camera = 0;
   detail::FeatureMatch m;
+  bool anchor = false;  ///< to the first frame's keypoints
 };
 
 double pixel_size(const Camera& cam, const Eigen::Vector3d& X) { return std::max(cam.depth(X), 1e-9) / cam.K()(0, 0); }
@@ -232,14 +234,20 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
     for (int k = 0; k < n; ++k) {
       const std::size_t K = std::size_t(k);
       nt[K] = detail::match_features(I.prev[K], cur[K], I.mesh, cameras_[K], o.ratio, o.max_flow_px, per[K]);
-      if (o.anchor_first_frame && I.frames > 1)
-        na[K] = detail::match_features(I.anchor[K], cur[K], I.mesh, cameras_[K], o.ratio, o.max_flow_px, per[K]);
+      if (o.anchor_first_frame && I.frames > 1) {
+        if (o.anchor_all_views)  // the first frame's keypoints of every view whose surface point faces this camera now
+          na[K] = detail::match_features(detail::facing_features(I.anchor, I.mesh, cameras_[K], 0.3), cur[K], I.mesh, cameras_[K], o.ratio,
+                                         o.max_flow_px, per[K]);
+        else
+          na[K] = detail::match_features(I.anchor[K], cur[K], I.mesh, cameras_[K], o.ratio, o.max_flow_px, per[K]);
+      }
     }
     for (int k = 0; k < n; ++k) tracks[std::size_t(k)] = per[std::size_t(k)];  // anchors last: they win
     for (int k = 0; k < n; ++k) {
       fr.temporal_matches += nt[std::size_t(k)];
       fr.anchor_matches += na[std::size_t(k)];
-      for (const auto& m : per[std::size_t(k)]) matches.push_back({k, m});
+      const auto& pk = per[std::size_t(k)];  // temporal matches first, then anchors
+      for (std::size_t q = 0; q < pk.size(); ++q) matches.push_back({k, pk[q], int(q) >= nt[std::size_t(k)]});
     }
   }
   fr.t_match = seconds_since(t0);
@@ -280,6 +288,7 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
           c.origin = ray.origin;
           c.dir = ray.direction;
           c.pixel_size = pixel_size(cam, c.p);
+          if (matches[i].anchor) c.weight = o.anchor_weight;
         }
       }
       int rims = 0;

@@ -72,6 +72,14 @@ struct PerformanceCaptureOptions {
   double ratio = 0.8;              ///< Lowe's ratio test, (0, 1]
   double max_flow_px = 60;         ///< largest image motion of a feature between frames, pixels, > 0
   bool anchor_first_frame = true;  ///< also match against the first frame's features (limits drift)
+  /// Anchors of every view: each view is matched against the first-frame features of all views
+  /// whose surface point faces it now (the body turns: a point one camera saw in the first frame
+  /// is seen by another later). false: only the same camera's.
+  bool anchor_all_views = true;
+  /// Weight of a first-frame anchor match relative to a frame-to-frame match, (0, 100]: anchors
+  /// are identified on the first frame's model and cannot drift; frame-to-frame tracks start on
+  /// the current model and inherit its error.
+  double anchor_weight = 4.0;
   // silhouettes
   bool silhouettes = true;         ///< rim constraints in the pose step
   double silhouette_weight = 0.5;  ///< weight of a rim constraint relative to a feature, (0, 10]; thesis 0.25–0.5
