@@ -27,6 +27,7 @@
 #include "bench_util.h"
 
 #include "tbsp/io/mesh_io.h"
+#include "tbsp/mesh/trajectory_smoother.h"
 #include "tbsp/io/mocap_io.h"
 #include "tbsp/mesh/remeshing.h"
 #include "tbsp/mesh/tetrahedralize.h"
@@ -62,12 +63,15 @@ void capture_rows(int frames, int size, const std::vector<int>& details) {
     StudioFrameStream stream(st, {});
     StudioFrame f;
     std::vector<double> err;
+    std::vector<Eigen::MatrixX3d> tracked, truth;
     double worst_iou = 1;
     while (stream.next(f)) {
       TriMesh m;
       pc.track(f.images, f.silhouettes, f.frame, m);
       const TriMesh gt = read_mesh(st.groundTruthPath(f.frame));
       err.push_back((m.V - gt.V).rowwise().norm().mean() / diag);
+      tracked.push_back(m.V);
+      truth.push_back(gt.V);
       worst_iou = std::min(worst_iou, pc.report().frames.back().iou_min);
     }
     const auto& r = pc.report();
@@ -80,6 +84,13 @@ void capture_rows(int frames, int size, const std::vector<int>& details) {
     std::printf("| %ld | %ld | %.2f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.3f | %.4f | %.2f |\n", long(rest.V.rows()), long(r.tets),
                 r.t_setup, median(t[0]), median(t[1]), median(t[2]), median(t[3]), median(t[4]), median(t[5]), median(t[6]),
                 100 * *std::max_element(err.begin(), err.end()), worst_iou, err.size() > 5 ? err.back() / err[5] : 0.0);
+    // The optional temporal smoothing of the trajectories (TrajectorySmoother) on the same run.
+    for (double sigma : {1.0, 2.0}) {
+      const std::vector<Eigen::MatrixX3d> sm = smooth_trajectories(tracked, sigma);
+      std::vector<double> es;
+      for (std::size_t k = 0; k < sm.size(); ++k) es.push_back((sm[k] - truth[k]).rowwise().norm().mean() / diag);
+      std::printf("| %ld, trajectories smoothed (sigma %.0f frames) | | | | | | | | | | %.3f | | %.2f |\n", long(rest.V.rows()), sigma, 100 * *std::max_element(es.begin(), es.end()), es.size() > 5 ? es.back() / es[5] : 0.0);
+    }
     std::printf("\nper frame: mean vertex error (%% diag) / first-frame anchor matches:");
     for (std::size_t k = 0; k < err.size(); ++k) std::printf("%s%.3f/%d", k % 10 ? " " : "\n  ", 100 * err[k], r.frames[k].anchor_matches);
     std::printf("\n");

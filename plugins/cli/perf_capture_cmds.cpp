@@ -17,6 +17,7 @@
 #include "tbsp/io/atomic_file.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/studio.h"
+#include "tbsp/mesh/trajectory_smoother.h"
 #include "tbsp/multiview/performance_capture.h"
 #include "tbsp/multiview/rasterizer.h"
 
@@ -30,6 +31,7 @@ struct CaptureArgs {
   std::string studio, mesh, out, frames;
   PerformanceCaptureOptions o;
   int every = 1, overlays = 4;
+  double smooth = 0;
   bool no_features = false, no_meshes = false, quiet = false;
 };
 
@@ -40,7 +42,7 @@ void add_capture(CLI::App& app, CaptureArgs& a, CLI::App*& sub) {
   sub->add_option("--out", a.out, "output folder: mesh_FFFF.ply, capture_report.json, overlay_FFFF.png")->required();
   sub->add_option("--frames", a.frames, "frames a:b (inclusive) or one frame; default all");
   sub->add_option("--every", a.every, "write every n-th mesh (default 1; every frame is still tracked)")->check(CLI::PositiveNumber);
-  sub->add_option("--tets", a.o.tets, "tetrahedra of the control mesh (default 5000; 0 = the template as is)");
+  sub->add_option("--tets", a.o.tets, "tetrahedra of the control mesh (default 10000; 0 = the template as is)");
   sub->add_option("--handles", a.o.handles, "handle vertices on the control surface (default 150)");
   sub->add_option("--rounds", a.o.pose_rounds, "pose rounds per frame (default 3)");
   sub->add_flag("--no-features", a.no_features, "silhouettes only (no SIFT feature tracking)");
@@ -49,6 +51,10 @@ void add_capture(CLI::App& app, CaptureArgs& a, CLI::App*& sub) {
   sub->add_option("--failure-iou", a.o.failure_iou, "a frame whose worst view IoU is below this is reported as a tracking failure (default 0.85)");
   sub->add_option("--overlays", a.overlays, "frames with a PNG overlay of the mesh on the camera images (default 4; 0 = none)")
       ->check(CLI::NonNegativeNumber);
+  sub->add_option("--smooth", a.smooth,
+                  "temporal smoothing of the vertex trajectories: Gaussian sigma in frames (default 0 = none; meshes are written "
+                  "ceil(3 sigma) frames late, overlays show the unsmoothed tracking)")
+      ->check(CLI::Range(0.0, 50.0));
   sub->add_flag("--no-meshes", a.no_meshes, "track and report only, write no mesh files");
   sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
 }
@@ -111,6 +117,7 @@ int cmd_capture(const CaptureArgs& a) {
                           {"template", a.mesh},
                           {"frames", done},
                           {"meshes_written", written},
+                          {"smooth_sigma_frames", a.smooth},
                           {"failed_frames", r.failed_frames},
                           {"worst_view_iou", r.frames.empty() ? 0.0 : worst},
                           {"mean_iou", mean},
@@ -123,27 +130,38 @@ int cmd_capture(const CaptureArgs& a) {
     if (!error.empty()) rep["error"] = error;
     write_text_file_atomic((fs::path(a.out) / "capture_report.json").string(), rep.dump(1) + "\n");
   };
+  TrajectorySmoother smoother(a.smooth);
+  auto write_frames = [&](const std::vector<TrajectorySmoother::Frame>& ready) {
+    for (const auto& [frame, V] : ready) {
+      if (a.no_meshes || (frame - first) % a.every != 0) continue;
+      char name[32];
+      std::snprintf(name, sizeof name, "mesh_%04d.ply", frame);
+      TriMesh m;
+      m.V = V;
+      m.F = tmpl.F;
+      write_mesh((fs::path(a.out) / name).string(), m);
+      ++written;
+    }
+  };
   try {
     for_each_frame(st, first, last, true, a.quiet, [&](const StudioFrame& fr, const ProgressCallback& progress, ProgressBar&) {
       pc.setProgressCallback(progress);
       TriMesh m;
       pc.track(fr.images, fr.silhouettes, fr.frame, m);
       ++done;
-      char name[32];
-      if (!a.no_meshes && (fr.frame - first) % a.every == 0) {
-        std::snprintf(name, sizeof name, "mesh_%04d.ply", fr.frame);
-        write_mesh((fs::path(a.out) / name).string(), m);
-        ++written;
-      }
+      write_frames(smoother.push(fr.frame, m.V));
       if (std::binary_search(overlay_frames.begin(), overlay_frames.end(), fr.frame)) {
+        char name[32];
         std::snprintf(name, sizeof name, "overlay_%04d.png", fr.frame);
         write_png((fs::path(a.out) / name).string(), overlay_grid(m, cams, fr));
       }
     });
   } catch (const Error& e) {
-    write_report(e.what());  // what was tracked so far stays usable
+    write_frames(smoother.flush());  // what was tracked so far stays usable
+    write_report(e.what());
     throw;
   }
+  write_frames(smoother.flush());
   write_report("");
   const auto& r = pc.report();
   if (!a.quiet) {

@@ -43,7 +43,8 @@ TEST(CliPerfCapture, TracksAStudioIntoMeshesReportAndOverlays) {
   const double diag = (g.V.colwise().maxCoeff() - g.V.colwise().minCoeff()).norm();
   EXPECT_LT((m.V - g.V).rowwise().norm().mean(), 0.015 * diag);
 
-  // An empty silhouette in frame 3: exit 2 naming the camera; frames 1-2 are in the report with the error.
+  // An empty silhouette in frame 3: exit 2 naming the camera; frames 1-2 are in the report with
+  // the error, and their meshes are written although temporal smoothing still held them back.
   const fs::path bad = dir / "bad";
   fs::copy(st, bad, fs::copy_options::recursive);
   const fs::path sil = bad / "silhouettes/cam2/0003.png";
@@ -51,7 +52,7 @@ TEST(CliPerfCapture, TracksAStudioIntoMeshesReportAndOverlays) {
   cv::imwrite(sil.string(), cv::Mat::zeros(300, 300, CV_8U));
   const fs::path out2 = dir / "out2";
   r = test::run_cli("capture -q " + bad.string() + " --template " + (bad / "template.ply").string() + " --out " + out2.string() +
-                        " --frames 1:3 --overlays 0 --tets 3000",
+                        " --frames 1:3 --overlays 0 --tets 3000 --smooth 1",
                     dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("cam2"), std::string::npos) << r.err;
@@ -59,7 +60,10 @@ TEST(CliPerfCapture, TracksAStudioIntoMeshesReportAndOverlays) {
   const auto rep2 = test::load_json(out2 / "capture_report.json");
   EXPECT_EQ(rep2["frames"].get<int>(), 2);
   EXPECT_TRUE(rep2.contains("error"));
+  EXPECT_TRUE(fs::exists(out2 / "mesh_0001.ply"));
   EXPECT_TRUE(fs::exists(out2 / "mesh_0002.ply"));
+  EXPECT_EQ(rep2["meshes_written"].get<int>(), 2);
+  EXPECT_EQ(rep2["smooth_sigma_frames"].get<double>(), 1.0);
 
   // A studio without silhouettes, a missing template: exit 2 naming what is missing; the first
   // run's report is not clobbered.
