@@ -16,6 +16,8 @@
 //    into an 8-camera studio (--capture-size) with the solid texture, STEPS in-between frames per
 //    gap made by interpolating vertex positions; template = frame 0000, tracked to the end; the
 //    error and IoU at the captured frames 0050/0100/0150 and the worst over all frames.
+// 5. --stereo FRAMES: model-guided stereo after the silhouette refinement (stereo_refine) on the
+//    performer with 1 cm folds (detail 2): the same sequence without and with it.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -29,6 +31,7 @@
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/mesh/trajectory_smoother.h"
 #include "tbsp/io/mocap_io.h"
+#include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/mesh/remeshing.h"
 #include "tbsp/mesh/tetrahedralize.h"
 #include "tbsp/io/studio.h"
@@ -42,21 +45,36 @@ using namespace tbsp::bench;
 
 namespace {
 
+// The synthetic studio (8 views of size², textured performer with a skirt) written to `dir`.
+struct SynthSequence {
+  Studio studio;
+  TriMesh rest;
+  double diag = 0;
+};
+SynthSequence synth_sequence(const std::string& dir, int frames, int size, int detail, double folds = 0) {
+  synth::StudioOptions so;
+  so.frames = frames;
+  so.width = so.height = size;
+  so.detail = detail;
+  so.folds = folds;
+  so.markers = 4;
+  synth::write_synthetic_studio(dir, so);
+  SynthSequence s;
+  s.studio = read_studio(dir + "/studio.yaml");
+  s.rest = read_mesh(dir + "/template.ply");
+  s.diag = (s.rest.V.colwise().maxCoeff() - s.rest.V.colwise().minCoeff()).norm();
+  return s;
+}
+
 void capture_rows(int frames, int size, const std::vector<int>& details) {
   std::printf("\n## Performance capture (8 views of %dx%d, %d frames; medians per frame, seconds)\n\n", size, size, frames);
   std::printf("| template vertices | control tets | setup | SIFT | matching + lifting | pose | optimization | transfer | refinement | total per frame | "
               "worst mean vertex error (%% diag) | worst view IoU | error last / frame 5 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (int detail : details) {
-    const std::string dir = "/tmp/tbsp_bench_capture_d" + std::to_string(detail);
-    synth::StudioOptions so;
-    so.frames = frames;
-    so.width = so.height = size;
-    so.detail = detail;
-    so.markers = 4;
-    synth::write_synthetic_studio(dir, so);
-    const Studio st = read_studio(dir + "/studio.yaml");
-    const TriMesh rest = read_mesh(dir + "/template.ply");
-    const double diag = (rest.V.colwise().maxCoeff() - rest.V.colwise().minCoeff()).norm();
+    const SynthSequence seq = synth_sequence("/tmp/tbsp_bench_capture_d" + std::to_string(detail), frames, size, detail);
+    const Studio& st = seq.studio;
+    const TriMesh& rest = seq.rest;
+    const double diag = seq.diag;
     PerformanceCapture pc;
     pc.setCameras(st.cameraList());
     pc.setTemplate(rest);
@@ -143,10 +161,55 @@ void vlasic_rows(int steps, int size) {
   }
 }
 
+// Model-guided stereo after the refinement (PerformanceCapture::stereo_refine) on a performer
+// with 1 cm folds (synth-studio --detail 2 --folds 0.01): the same sequence without and with it.
+void stereo_rows(int frames, int size) {
+  const SynthSequence seq = synth_sequence("/tmp/tbsp_bench_capture_folds", frames, size, 2, 0.01);
+  const Studio& st = seq.studio;
+  const TriMesh& rest = seq.rest;
+  const double diag = seq.diag;
+  std::printf("\n## Performance capture with model-guided stereo (8 views of %dx%d, %d frames, 1 cm folds, %ld vertices)\n\n", size, size, frames,
+              long(rest.V.rows()));
+  std::printf("| stereo_refine | mean vertex error, mean over frames (%% diag) | worst frame | distance to the truth's surface, mean (%% diag) | "
+              "worst view IoU | stereo points per frame | stereo s per frame | total s per frame |\n|---|---|---|---|---|---|---|---|\n");
+  for (bool stereo : {false, true}) {
+    PerformanceCaptureOptions o;
+    o.stereo_refine = stereo;
+    PerformanceCapture pc;
+    pc.setOptions(o);
+    pc.setCameras(st.cameraList());
+    pc.setTemplate(rest);
+    StudioFrameStream stream(st, {});
+    StudioFrame f;
+    std::vector<double> err, surf, ts, tt, pts;
+    double worst_iou = 1;
+    while (stream.next(f)) {
+      TriMesh m;
+      pc.track(f.images, f.silhouettes, f.frame, m);
+      const TriMesh gt = read_mesh(st.groundTruthPath(f.frame));
+      err.push_back((m.V - gt.V).rowwise().norm().mean() / diag);
+      surf.push_back(point_mesh_distances(gt.V, gt.F, m.V).mean() / diag);  // closest point: no tangential slide counted
+      const auto& fr = pc.report().frames.back();
+      worst_iou = std::min(worst_iou, fr.iou_min);
+      if (f.frame > 0) {
+        ts.push_back(fr.t_stereo);
+        tt.push_back(fr.t_total);
+        pts.push_back(fr.stereo_points);
+      }
+    }
+    double mean = 0, smean = 0;
+    for (double e : err) mean += e / double(err.size());
+    for (double e : surf) smean += e / double(surf.size());
+    std::printf("| %s | %.3f | %.3f | %.3f | %.4f | %.0f | %.2f | %.2f |\n", stereo ? "on" : "off", 100 * mean,
+                100 * *std::max_element(err.begin(), err.end()), 100 * smean, worst_iou, median(pts), median(ts), median(tt));
+    std::fflush(stdout);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0;
+  int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0, stereo = 0;
   bool capture_only = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--repeats") && i + 1 < argc) repeats = std::max(1, std::atoi(argv[++i]));
@@ -154,14 +217,16 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--capture-size") && i + 1 < argc) capture_size = std::max(64, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--capture-only")) capture_only = true;
     else if (!std::strcmp(argv[i], "--vlasic") && i + 1 < argc) vlasic = std::max(0, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--stereo") && i + 1 < argc) stereo = std::max(0, std::atoi(argv[++i]));
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only] [--vlasic STEPS]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only] [--vlasic STEPS] [--stereo FRAMES]\n");
       return 2;
     }
   }
-  if (capture_only || vlasic > 0) {
+  if (capture_only || vlasic > 0 || stereo > 0) {
     if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {1});
     if (vlasic > 0) vlasic_rows(vlasic, capture_size);
+    if (stereo > 0) stereo_rows(stereo, capture_size);
     return 0;
   }
   const std::string shared = TBSP_SHARED_DATA_DIR;

@@ -48,6 +48,9 @@ void add_capture(CLI::App& app, CaptureArgs& a, CLI::App*& sub) {
   sub->add_flag("--no-features", a.no_features, "silhouettes only (no SIFT feature tracking)");
   sub->add_flag("--optimize-handles", a.o.optimize_handles, "the thesis' black-box handle optimization (NLopt BOBYQA) after the pose step");
   sub->add_option("--refine-iterations", a.o.refine_iterations, "silhouette refinement iterations per frame (default 5; 0 = none)");
+  sub->add_flag("--stereo", a.o.stereo_refine, "model-guided stereo after the silhouette refinement (§6.3.3: folds, concavities; ~1-2 s per frame)");
+  sub->add_option("--stereo-range", a.o.stereo_search_range, "its search along each ray, +- world units (default 1 % of the template's diagonal)")
+      ->check(CLI::NonNegativeNumber);
   sub->add_option("--failure-iou", a.o.failure_iou, "a frame whose worst view IoU is below this is reported as a tracking failure (default 0.85)");
   sub->add_option("--overlays", a.overlays, "frames with a PNG overlay of the mesh on the camera images (default 4; 0 = none)")
       ->check(CLI::NonNegativeNumber);
@@ -72,9 +75,10 @@ nlohmann::json frame_json(const CaptureFrameReport& f) {
           {"anchor_matches", f.anchor_matches},
           {"feature_inliers", f.inliers},
           {"rim_constraints", f.rim_constraints},
+          {"stereo_points", f.stereo_points},
           {"optimizer", {{"evaluations", f.evaluations}, {"iou_before", f.opt_iou_before}, {"iou_after", f.opt_iou_after}}},
           {"seconds", {{"features", f.t_features}, {"match", f.t_match}, {"pose", f.t_pose}, {"optimize", f.t_optimize},
-                       {"transfer", f.t_transfer}, {"refine", f.t_refine}, {"total", f.t_total}}}};
+                       {"transfer", f.t_transfer}, {"refine", f.t_refine}, {"stereo", f.t_stereo}, {"total", f.t_total}}}};
 }
 
 int cmd_capture(const CaptureArgs& a) {

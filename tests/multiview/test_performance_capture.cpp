@@ -156,13 +156,16 @@ TEST(PerformanceCapture, BadInputIsAClearError) {
 }
 
 TEST(PerformanceCapture, SilhouettesOnlyAndHandleOptimizationRun) {
-  // The silhouette-only mode and the black-box handle optimization (NLopt) on 3 frames: they run,
-  // keep the overlap high and the optimizer does not make the overlap worse.
+  // The silhouette-only mode, the black-box handle optimization (NLopt) and model-guided stereo
+  // after the refinement on 3 frames: they run, keep the overlap high and the optimizer does not
+  // make the overlap worse.
   const Sequence s = make_sequence("perf_capture_modes", 3, 300);
-  for (const bool optimize : {false, true}) {
+  for (const int mode : {0, 1, 2}) {
+    const bool optimize = mode == 1, stereo = mode == 2;
     PerformanceCaptureOptions o;
-    o.features = optimize;  // the optimization run keeps the features; the other runs on silhouettes alone
+    o.features = mode > 0;  // mode 0 runs on silhouettes alone
     o.optimize_handles = optimize;
+    o.stereo_refine = stereo;
     o.max_evaluations = 60;
     o.tets = 3000;
     PerformanceCapture pc;
@@ -175,16 +178,24 @@ TEST(PerformanceCapture, SilhouettesOnlyAndHandleOptimizationRun) {
       TriMesh m;
       pc.track(f.images, f.silhouettes, f.frame, m);
       const CaptureFrameReport& fr = pc.report().frames.back();
-      EXPECT_GT(fr.iou_min, 0.9) << "frame " << f.frame << " optimize " << optimize;
+      EXPECT_GT(fr.iou_min, 0.9) << "frame " << f.frame << " mode " << mode;
       if (optimize) {
         EXPECT_GT(fr.evaluations, 10);
         // the objective (1 - IoU + penalties) never increases; the overlap alone may give a little
         EXPECT_GE(fr.opt_iou_after, fr.opt_iou_before - 0.005);
         std::printf("frame %d: handle optimization %d evaluations, control IoU %.4f -> %.4f\n", f.frame, fr.evaluations, fr.opt_iou_before,
                     fr.opt_iou_after);
+      } else if (stereo) {
+        EXPECT_GT(fr.stereo_points, 100) << "frame " << f.frame;
+        EXPECT_GT(fr.t_stereo, 0.0);
       } else {
         EXPECT_EQ(fr.keypoints, 0);
+        EXPECT_EQ(fr.stereo_points, 0);
       }
     }
   }
+  PerformanceCaptureOptions bad;
+  bad.stereo_refine = true;
+  bad.features = false;  // stereo needs the images
+  EXPECT_THROW(PerformanceCapture().setOptions(bad), InvalidInput);
 }

@@ -76,6 +76,19 @@ RealResult pose_and_refine(const RealCase& c, const std::string& pose_json) {
   return r;
 }
 
+// The bounds a case must meet (each set from the measured figures, with margin).
+struct Bounds {
+  double max_click_rms_px, min_view_iou, min_mean_iou, min_view_gain;
+  long xor_divisor;  ///< all-view XOR after <= before / this
+};
+void expect_within(const RealResult& r, const Bounds& b) {
+  EXPECT_LE(r.worst_rms, b.max_click_rms_px);
+  EXPECT_GE(r.iou_after_min, b.min_view_iou);
+  EXPECT_GE(r.iou_after_mean, b.min_mean_iou);
+  EXPECT_GE(r.gain_min, b.min_view_gain);
+  EXPECT_LT(r.refine.xor_after, r.refine.xor_before / b.xor_divisor);
+}
+
 }  // namespace
 
 TEST(SilhouetteReal, InriaDancerPosedByHandPlacedMarkersAndRefined) {
@@ -91,12 +104,9 @@ TEST(SilhouetteReal, InriaDancerPosedByHandPlacedMarkersAndRefined) {
   }
   const RealResult r = pose_and_refine(c, test::sample("poses/dancer_smpl_pose.json"));
   // Hand clicks of joint centres in 780x582 images: measured <= 8.6 px (a knee under the dress).
-  EXPECT_LE(r.worst_rms, 12.0);
-  // Measured: posed 0.55-0.73, refined 0.90-0.96 per view (the dress is not in the template).
-  EXPECT_GE(r.iou_after_min, 0.87);
-  EXPECT_GE(r.iou_after_mean, 0.91);
-  EXPECT_GE(r.gain_min, 0.15);
-  EXPECT_LT(r.refine.xor_after, r.refine.xor_before / 3);
+  // IoU measured: posed 0.57-0.73, refined 0.90-0.96 per view (the dress is not in the template),
+  // gain >= 0.23, XOR 46,881 -> 7,442.
+  expect_within(r, {12.0, 0.87, 0.91, 0.15, 3});
 }
 
 TEST(SilhouetteReal, TsinghuaDomeWd2PosedByHandPlacedMarkersAndRefined) {
@@ -112,11 +122,7 @@ TEST(SilhouetteReal, TsinghuaDomeWd2PosedByHandPlacedMarkersAndRefined) {
     ASSERT_FALSE(c.silhouettes.back().empty()) << cam.name();
   }
   const RealResult r = pose_and_refine(c, test::sample("poses/wd2_smpl_pose.json"));
-  // Measured <= 19 px (an elbow) in 1024x768 images.
-  EXPECT_LE(r.worst_rms, 25.0);
-  // Measured: posed 0.60-0.69, refined 0.95-0.97 in all 20 views.
-  EXPECT_GE(r.iou_after_min, 0.93);
-  EXPECT_GE(r.iou_after_mean, 0.95);
-  EXPECT_GE(r.gain_min, 0.2);
-  EXPECT_LT(r.refine.xor_after, r.refine.xor_before / 5);
+  // Clicks measured <= 19 px (an elbow) in 1024x768 images; IoU posed 0.60-0.69, refined
+  // 0.95-0.97 in all 20 views, XOR 625,687 -> 46,328.
+  expect_within(r, {25.0, 0.93, 0.95, 0.2, 5});
 }

@@ -13,6 +13,7 @@
 #include "tbsp/mesh/tetrahedralize.h"
 #include "tbsp/mesh/topology.h"
 #include "tbsp/multiview/rasterizer.h"
+#include "tbsp/multiview/model_guided_stereo.h"
 #include "tbsp/multiview/silhouette_refinement.h"
 #include "capture_features.h"
 #include "capture_pose.h"
@@ -43,6 +44,8 @@ bool PerformanceCaptureOptions::isValid(std::string* why) const {
   if (key_handles < 1 || key_handles > 100) return fail("key_handles must be in 1..100");
   if (max_evaluations < 10) return fail("max_evaluations must be >= 10");
   if (!(optimize_image_scale > 0) || optimize_image_scale > 1) return fail("optimize_image_scale must be in (0, 1]");
+  if (!(stereo_search_range >= 0) || !std::isfinite(stereo_search_range)) return fail("stereo_search_range must be >= 0 and finite");
+  if (stereo_refine && !features) return fail("stereo_refine needs the images (features = true)");
   if (refine_iterations < 0 || refine_iterations > 100) return fail("refine_iterations must be in 0..100");
   if (!(failure_iou >= 0) || !(failure_iou < 1)) return fail("failure_iou must be in [0, 1)");
   if (!features && !silhouettes) return fail("features and silhouettes are both off: nothing would drive the template");
@@ -371,6 +374,23 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
     m.V = I.transfer.apply(I.X);
     m.F = template_.F;
     fr.t_transfer += seconds_since(t1);
+    // Model-guided stereo first: the silhouette refinement after it restores the contour the
+    // stereo fit may have moved.
+    if (o.stereo_refine) {
+      t1 = Clock::now();
+      ModelGuidedStereoOptions mo;
+      const double diag = (template_.V.colwise().maxCoeff() - template_.V.colwise().minCoeff()).norm();
+      mo.search_range = o.stereo_search_range > 0 ? o.stereo_search_range : 0.01 * diag;
+      ModelGuidedStereo mgs;
+      mgs.setOptions(mo);
+      mgs.setInputFrame(cameras_, images, silhouettes, frame);
+      mgs.setInputMesh(m);
+      TriMesh detailed;
+      mgs.refine(detailed);
+      fr.stereo_points = int(mgs.report().points);
+      m = std::move(detailed);
+      fr.t_stereo += seconds_since(t1);
+    }
     t1 = Clock::now();
     if (o.refine_iterations > 0) {
       SilhouetteRefinement sr;
@@ -397,13 +417,14 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
   TriMesh result;
   SilhouetteRefinementReport rr;
   finish(result, rr);
-  auto summarize = [&](const SilhouetteRefinementReport& r, bool refined, std::vector<double>& iou) {
+  // iou_after: of the returned mesh (refined, or the transferred pose when refinement is off,
+  // then equal to iou_before; after model-guided stereo when it ran)
+  auto summarize = [&](const SilhouetteRefinementReport& r, std::vector<double>& iou) {
     iou.clear();
-    for (const auto& v : r.views) iou.push_back(refined ? v.iou_after : v.iou_before);
+    for (const auto& v : r.views) iou.push_back(v.iou_after);
     return *std::min_element(iou.begin(), iou.end());
   };
-  const bool refined = o.refine_iterations > 0;
-  double iou_min = summarize(rr, refined, fr.iou);
+  double iou_min = summarize(rr, fr.iou);
   {
     double s = 0;
     for (const auto& v : rr.views) s += v.iou_before;
@@ -422,7 +443,7 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
     SilhouetteRefinementReport rr2;
     finish(again, rr2);
     std::vector<double> iou2;
-    const double m2 = summarize(rr2, refined, iou2);
+    const double m2 = summarize(rr2, iou2);
     if (m2 > iou_min) {
       result = std::move(again);
       fr.iou = iou2;

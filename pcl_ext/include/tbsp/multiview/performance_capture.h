@@ -91,6 +91,11 @@ struct PerformanceCaptureOptions {
   double optimize_image_scale = 0.25;  ///< silhouettes are compared at this scale, (0, 1]
   // detail and failure handling
   int refine_iterations = 5;       ///< SilhouetteRefinement iterations per frame (0 = none), 0..100
+  /// Model-guided stereo (ModelGuidedStereo, §6.3.3) after the silhouette refinement: detail the
+  /// silhouettes cannot see (folds, concavities); needs the images; ~1–2 s per frame. Measured in
+  /// docs/performance_capture.md; off by default.
+  bool stereo_refine = false;
+  double stereo_search_range = 0;  ///< its ± search along each ray, world units, >= 0; 0 = 1 % of the template's bounding-box diagonal
   double failure_iou = 0.85;       ///< a frame whose smallest view IoU is below this is a tracking failure, [0, 1)
 
   bool isValid(std::string* why = nullptr) const;
@@ -111,7 +116,8 @@ struct CaptureFrameReport {
   double opt_iou_before = 0, opt_iou_after = 0;  ///< handle optimization: mean IoU of the control surface (downscaled views)
   bool failed = false;               ///< tracking failure detected (iou_min < failure_iou after the retry)
   bool retried = false;              ///< the silhouette-only retry ran
-  double t_features = 0, t_match = 0, t_pose = 0, t_optimize = 0, t_transfer = 0, t_refine = 0, t_total = 0;
+  int stereo_points = 0;             ///< model-guided stereo points used (stereo_refine)
+  double t_features = 0, t_match = 0, t_pose = 0, t_optimize = 0, t_transfer = 0, t_refine = 0, t_stereo = 0, t_total = 0;
 };
 
 struct PerformanceCaptureReport {
