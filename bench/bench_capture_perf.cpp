@@ -71,32 +71,39 @@ SynthSequence synth_sequence(const std::string& dir, int frames, int size, int d
   return s;
 }
 
+// Tracks the whole sequence with `pc` (cameras and template set here); per frame,
+// on_frame(frame number, tracked mesh, ground truth, the frame's report).
+template <typename OnFrame>
+void track_sequence(const SynthSequence& seq, PerformanceCapture& pc, OnFrame on_frame) {
+  pc.setCameras(seq.studio.cameraList());
+  pc.setTemplate(seq.rest);
+  StudioFrameStream stream(seq.studio, {});
+  StudioFrame f;
+  while (stream.next(f)) {
+    TriMesh m;
+    pc.track(f.images, f.silhouettes, f.frame, m);
+    on_frame(f.frame, m, read_mesh(seq.studio.groundTruthPath(f.frame)), pc.report().frames.back());
+  }
+}
+
 void capture_rows(int frames, int size, const std::vector<int>& details) {
   std::printf("\n## Performance capture (8 views of %dx%d, %d frames; medians per frame, seconds)\n\n", size, size, frames);
   std::printf("| template vertices | control tets | setup | SIFT | matching + lifting | pose | optimization | transfer | refinement | total per frame | "
               "worst mean vertex error (%% diag) | worst view IoU | error last / frame 5 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (int detail : details) {
     const SynthSequence seq = synth_sequence("/tmp/tbsp_bench_capture_d" + std::to_string(detail), frames, size, detail);
-    const Studio& st = seq.studio;
     const TriMesh& rest = seq.rest;
     const double diag = seq.diag;
     PerformanceCapture pc;
-    pc.setCameras(st.cameraList());
-    pc.setTemplate(rest);
-    StudioFrameStream stream(st, {});
-    StudioFrame f;
     std::vector<double> err;
     std::vector<Eigen::MatrixX3d> tracked, truth;
     double worst_iou = 1;
-    while (stream.next(f)) {
-      TriMesh m;
-      pc.track(f.images, f.silhouettes, f.frame, m);
-      const TriMesh gt = read_mesh(st.groundTruthPath(f.frame));
+    track_sequence(seq, pc, [&](int, const TriMesh& m, const TriMesh& gt, const CaptureFrameReport& fr) {
       err.push_back((m.V - gt.V).rowwise().norm().mean() / diag);
       tracked.push_back(m.V);
       truth.push_back(gt.V);
-      worst_iou = std::min(worst_iou, pc.report().frames.back().iou_min);
-    }
+      worst_iou = std::min(worst_iou, fr.iou_min);
+    });
     const auto& r = pc.report();
     std::vector<double> t[7];
     for (std::size_t k = 1; k < r.frames.size(); ++k) {  // frame 0 registers; the rest track
@@ -204,7 +211,6 @@ void vlasic_rows(int steps, int size, bool follow_turn) {
 // with 1 cm folds (synth-studio --detail 2 --folds 0.01): the same sequence without and with it.
 void stereo_rows(int frames, int size) {
   const SynthSequence seq = synth_sequence("/tmp/tbsp_bench_capture_folds", frames, size, 2, 0.01);
-  const Studio& st = seq.studio;
   const TriMesh& rest = seq.rest;
   const double diag = seq.diag;
   std::printf("\n## Performance capture with model-guided stereo (8 views of %dx%d, %d frames, 1 cm folds, %ld vertices)\n\n", size, size, frames,
@@ -216,26 +222,18 @@ void stereo_rows(int frames, int size) {
     o.stereo_refine = stereo;
     PerformanceCapture pc;
     pc.setOptions(o);
-    pc.setCameras(st.cameraList());
-    pc.setTemplate(rest);
-    StudioFrameStream stream(st, {});
-    StudioFrame f;
     std::vector<double> err, surf, ts, tt, pts;
     double worst_iou = 1;
-    while (stream.next(f)) {
-      TriMesh m;
-      pc.track(f.images, f.silhouettes, f.frame, m);
-      const TriMesh gt = read_mesh(st.groundTruthPath(f.frame));
+    track_sequence(seq, pc, [&](int frame, const TriMesh& m, const TriMesh& gt, const CaptureFrameReport& fr) {
       err.push_back((m.V - gt.V).rowwise().norm().mean() / diag);
       surf.push_back(point_mesh_distances(gt.V, gt.F, m.V).mean() / diag);  // closest point: no tangential slide counted
-      const auto& fr = pc.report().frames.back();
       worst_iou = std::min(worst_iou, fr.iou_min);
-      if (f.frame > 0) {
+      if (frame > 0) {
         ts.push_back(fr.t_stereo);
         tt.push_back(fr.t_total);
         pts.push_back(fr.stereo_points);
       }
-    }
+    });
     double mean = 0, smean = 0;
     for (double e : err) mean += e / double(err.size());
     for (double e : surf) smean += e / double(surf.size());
