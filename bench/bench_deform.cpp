@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <vector>
 
 #include "tbsp/deform/laplacian_deformer.h"
 #include "tbsp/io/mesh_io.h"
@@ -21,7 +22,17 @@
 using namespace tbsp;
 
 namespace {
-TriMesh mesh_for(int level) { return make_icosphere(level); }  // 2562, 10242, 40962, 163842 vertices
+// arg 4..7: icospheres of 2,562 / 10,242 / 40,962 / 163,842 vertices; 100: a 317 x 317 grid
+// (100,489 vertices); 50: the Stanford Armadillo (49,990 vertices, ../shared/data)
+TriMesh mesh_for(int arg) {
+  if (arg == 100) return make_grid(317, 317);
+  if (arg == 50) {
+    const std::string p = std::string(TBSP_SHARED_DATA_DIR) + "/meshes/keeganl__linear-subspace-deformation/armadillo.off";
+    if (std::filesystem::exists(p)) return read_mesh(p);
+    return make_icosphere(6);
+  }
+  return make_icosphere(arg);
+}
 
 void add_handles(LaplacianDeformer& d, const TriMesh& m, double shift) {
   for (Eigen::Index v = 0; v < m.V.rows(); v += m.V.rows() / 50)
@@ -52,10 +63,11 @@ static void BM_DeformResolveMovedTargets(benchmark::State& st) {
     d.setPositionTarget(0, Eigen::Vector3d(s, 0, 0));
     s += 1e-3;
     benchmark::DoNotOptimize(d.deform());
+    st.counters["solve_ms"] = 1e3 * d.report().t_solve;
   }
   st.counters["vertices"] = double(m.V.rows());
 }
-BENCHMARK(BM_DeformResolveMovedTargets)->DenseRange(4, 6)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_DeformResolveMovedTargets)->DenseRange(4, 6)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 
 static void BM_DeformRotationField(benchmark::State& st) {
   const TriMesh m = mesh_for(int(st.range(0)));
@@ -101,6 +113,54 @@ static void BM_RefactorizeSamePattern(benchmark::State& st) {
   st.counters["analyses"] = s.numAnalyses();
 }
 BENCHMARK(BM_RefactorizeSamePattern)->DenseRange(4, 6)->Unit(benchmark::kMillisecond);
+
+// Back-substitution alone (three right-hand sides, the x, y, z of a re-solve) on the same
+// matrix as BM_Factorize: what deform() pays on top of it is the right-hand side and the report.
+static void BM_CholeskySolve3(benchmark::State& st, bool cholmod_solve) {
+  const TriMesh m = mesh_for(int(st.range(0)));
+  const Eigen::SparseMatrix<double> L = laplacian(m.V, m.F);
+  Eigen::SparseMatrix<double> N = Eigen::SparseMatrix<double>(L.transpose() * L);
+  for (int i = 0; i < N.rows(); i += 50) N.coeffRef(i, i) += 1.0;
+  SparseCholesky s;
+  s.compute(N);
+  s.setCholmodSolve(cholmod_solve);
+  const Eigen::MatrixXd B = Eigen::MatrixXd::Ones(N.rows(), 3);
+  Eigen::MatrixXd X;
+  for (auto _ : st) {
+    s.solve(B, X);
+    benchmark::DoNotOptimize(X.data());
+  }
+  st.counters["vertices"] = double(m.V.rows());
+  st.counters["factor_MB"] = 8e-6 * double(s.factorNonZeros());
+}
+BENCHMARK_CAPTURE(BM_CholeskySolve3, tbsp, false)->DenseRange(4, 6)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_CholeskySolve3, cholmod, true)->DenseRange(4, 6)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
+
+// The memory floor of a solve: streaming as many doubles as the factor stores, twice (forward
+// and backward), on 1 or 2 threads; what BM_CholeskySolve3/tbsp costs above it is arithmetic
+// and gathers, not bandwidth.
+static void BM_StreamFactorTwice(benchmark::State& st) {
+  const TriMesh m = mesh_for(int(st.range(0)));
+  const Eigen::SparseMatrix<double> L = laplacian(m.V, m.F);
+  Eigen::SparseMatrix<double> N = Eigen::SparseMatrix<double>(L.transpose() * L);
+  for (int i = 0; i < N.rows(); i += 50) N.coeffRef(i, i) += 1.0;
+  SparseCholesky s;
+  s.compute(N);
+  const std::vector<double> values(s.factorNonZeros(), 1.0);
+  const long count = long(values.size());
+  const int threads = int(st.range(1));
+  for (auto _ : st) {
+    double sum = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+#pragma omp parallel for simd num_threads(threads) reduction(+ : sum)
+      for (long i = 0; i < count; ++i) sum += values[std::size_t(i)];
+    }
+    benchmark::DoNotOptimize(sum);
+  }
+  st.counters["vertices"] = double(m.V.rows());
+  st.counters["factor_MB"] = 8e-6 * double(values.size());
+}
+BENCHMARK(BM_StreamFactorTwice)->ArgsProduct({{6, 50, 100}, {1, 2}})->Unit(benchmark::kMillisecond);
 
 // The deformation survey's 40k-vertex `plane` (Botsch & Sorkine 2008; ../shared/data,
 // EmperorJack__ShapeDeformer): a fixed region (1,809 vertices) and a handle region (1,608)

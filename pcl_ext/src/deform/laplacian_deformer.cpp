@@ -433,6 +433,7 @@ void LaplacianDeformer::buildSystem() {
     if (nf > 0) c.solver.compute(N);
     report_.t_factorize = seconds_since(t0);
     c.matrix_valid = true;
+    c.rhs_base_valid = false;
   };
   // fast path (uncoupled): every constraint term falls on NL's pattern (a vertex, or vertices of
   // one face, which are neighbours in LᵀL), so N is NL with values added in place — no triplet
@@ -551,12 +552,21 @@ Eigen::MatrixX3d LaplacianDeformer::deform() {
   const Eigen::Index nf = c.n_free;
   Eigen::MatrixX3d X = c.X0;
   if (nf > 0) {
-    const Eigen::MatrixX3d bL = d - L_ * c.X0;
-    const Eigen::MatrixX3d rL = c.L_free.transpose() * bL;  // nf by 3
     if (!c.coupled) {
-      Eigen::MatrixXd rhs = rL;
-      for (Eigen::Index i = 0; i < n; ++i)
-        if (c.free_index[std::size_t(i)] >= 0) rhs.row(c.free_index[std::size_t(i)]) += c.anchor * mesh_.V.row(i);
+      // the targets of soft constraints are what an interactive drag changes: the rest of the
+      // right-hand side is reused while δ' and the fixed positions stay the same
+      const bool same_base = c.rhs_base_valid && c.rhs_base.rows() == nf && c.rhs_delta.rows() == n &&
+                             c.rhs_delta == d && c.rhs_X0 == c.X0;
+      if (!same_base) {
+        c.rhs_base = c.L_free.transpose() * (d - L_ * c.X0);
+        for (Eigen::Index i = 0; i < n; ++i)
+          if (c.free_index[std::size_t(i)] >= 0) c.rhs_base.row(c.free_index[std::size_t(i)]) += c.anchor * mesh_.V.row(i);
+        c.rhs_delta = d;
+        c.rhs_X0 = c.X0;
+        c.rhs_base_valid = true;
+      }
+      Eigen::MatrixXd& rhs = c.rhs_work;
+      rhs = c.rhs_base;  // same size after the first solve: no allocation
       for (const auto& r : c.rows) {
         const auto& con = constraints_[std::size_t(r.cid)];
         Eigen::RowVector3d q = con.target.transpose();
@@ -568,10 +578,12 @@ Eigen::MatrixX3d LaplacianDeformer::deform() {
           if (f >= 0) rhs.row(f) += w2 * b * q;
         }
       }
-      const Eigen::MatrixXd Xf = c.solver.solve(rhs);
+      c.solver.solve(rhs, c.x_work);
+      const Eigen::MatrixXd& Xf = c.x_work;
       for (Eigen::Index i = 0; i < n; ++i)
         if (c.free_index[std::size_t(i)] >= 0) X.row(i) = Xf.row(c.free_index[std::size_t(i)]);
     } else {
+      const Eigen::MatrixX3d rL = c.L_free.transpose() * (d - L_ * c.X0);  // nf by 3
       Eigen::VectorXd rhs(3 * nf);
       for (int dd = 0; dd < 3; ++dd) rhs.segment(dd * nf, nf) = rL.col(dd);
       for (Eigen::Index i = 0; i < n; ++i)

@@ -35,6 +35,11 @@ struct LaplacianDeformer::Cache {
   std::vector<detail::ScalarRow> rows;  // coupled: every scalar row; uncoupled: one row per position constraint
   double anchor = 0;            // ε of the anchor term
   SparseCholesky solver;
+  // re-solve: the right-hand side's part that does not depend on soft targets,
+  // L_freeᵀ (δ' − L X0) + ε V, kept while δ' (rotated, scaled δ) and X0 are unchanged
+  bool rhs_base_valid = false;
+  Eigen::MatrixX3d rhs_delta, rhs_X0;
+  Eigen::MatrixXd rhs_base, rhs_work, x_work;
   // components
   Eigen::VectorXi component;
   int num_components = 0;

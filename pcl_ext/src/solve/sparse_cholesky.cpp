@@ -1,8 +1,10 @@
 #include "tbsp/solve/sparse_cholesky.h"
 
 #include "tbsp/solve/blas_threads.h"
+#include "supernodal_solve.h"
 
 #include <Eigen/SparseCholesky>
+#include <algorithm>
 #include <vector>
 #ifdef TBSP_HAVE_CHOLMOD
 #include <Eigen/CholmodSupport>
@@ -45,13 +47,45 @@ private:
 };
 }  // namespace
 
+#ifdef TBSP_HAVE_CHOLMOD
+namespace {
+// Eigen keeps the CHOLMOD factor protected; the solve below reads it directly.
+class CholmodLLT : public Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>> {
+public:
+  const cholmod_factor* factor() const { return m_cholmodFactor; }
+};
+
+// The view of a supernodal LLᵀ factor with int indices and real values, or an empty one
+// (n = 0) for any other kind (then CHOLMOD's own solve runs).
+detail::SupernodalFactorView supernodal_view(const cholmod_factor* f) {
+  detail::SupernodalFactorView v;
+  if (!f || !f->is_super || !f->is_ll || f->itype != CHOLMOD_INT || f->xtype != CHOLMOD_REAL ||
+      f->dtype != CHOLMOD_DOUBLE || !f->x || !f->Perm)
+    return v;
+  v.n = int(f->n);
+  v.nsuper = int(f->nsuper);
+  v.perm = static_cast<const int*>(f->Perm);
+  v.super = static_cast<const int*>(f->super);
+  v.pi = static_cast<const int*>(f->pi);
+  v.px = static_cast<const int*>(f->px);
+  v.s = static_cast<const int*>(f->s);
+  v.x = static_cast<const double*>(f->x);
+  for (int k = 0; k < v.nsuper; ++k) v.max_rows = std::max(v.max_rows, v.pi[k + 1] - v.pi[k]);
+  return v;
+}
+}  // namespace
+#endif
+
 struct SparseCholesky::Impl {
   Backend backend = Backend::EigenLDLT;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
 #ifdef TBSP_HAVE_CHOLMOD
-  Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>> cholmod;
+  CholmodLLT cholmod;
+  detail::SupernodalFactorView view;  // of cholmod's factor after the last factorization
+  detail::SupernodalPlan plan;        // its two-part split (rebuilt with each analysis)
 #endif
   bool factorized = false;
+  bool cholmod_solve = false;
   Eigen::Index n = 0;
   std::vector<int> outer, inner;  // pattern of the last analysed matrix
   int analyses = 0, factorizations = 0;
@@ -107,6 +141,9 @@ void SparseCholesky::compute(const Eigen::SparseMatrix<double>& A_in) {
     if (!same_pattern) { m.cholmod.analyzePattern(A); ++m.analyses; }
     m.cholmod.factorize(A);
     ok = m.cholmod.info() == Eigen::Success;
+    m.view = ok ? supernodal_view(m.cholmod.factor()) : detail::SupernodalFactorView{};
+    if (m.view.n > 0 && (!same_pattern || m.plan.top_index.size() != std::size_t(m.view.n)))
+      m.plan = detail::make_supernodal_plan(m.view);
   }
 #endif
   if (m.backend == Backend::EigenLDLT) {
@@ -128,20 +165,50 @@ void SparseCholesky::compute(const Eigen::SparseMatrix<double>& A_in) {
 }
 
 Eigen::MatrixXd SparseCholesky::solve(const Eigen::MatrixXd& B) const {
+  Eigen::MatrixXd X;
+  solve(B, X);
+  return X;
+}
+
+void SparseCholesky::solve(const Eigen::MatrixXd& B, Eigen::MatrixXd& X) const {
   const Impl& m = *impl_;
   if (!m.factorized) throw NumericalFailure("[tbsp::SparseCholesky::solve] no factorization; call compute() first");
   if (B.rows() != m.n)
     throw InvalidInput("[tbsp::SparseCholesky::solve] right-hand side has " + std::to_string(B.rows()) +
                        " rows, the system " + std::to_string(m.n));
-  Eigen::MatrixXd X;
-  const ScopedOmpDynamic omp_dynamic;
-  const ScopedBlasThreads blas_threads(1);  // (see compute)
+  bool done = false;
 #ifdef TBSP_HAVE_CHOLMOD
-  if (m.backend == Backend::Cholmod) X = m.cholmod.solve(B);
+  if (m.backend == Backend::Cholmod && !m.cholmod_solve && m.view.n == m.n && B.cols() > 0) {
+    // one buffer per thread, grown, never shrunk: no allocation once warm
+    thread_local std::vector<double> work;
+    const std::size_t need = detail::supernodal_work_size(m.view, m.plan, int(B.cols()));
+    if (work.size() < need) work.resize(need);
+    if (X.rows() != B.rows() || X.cols() != B.cols()) X.resize(B.rows(), B.cols());
+    detail::supernodal_solve(m.view, m.plan, int(B.cols()), B.data(), B.rows(), X.data(), X.rows(), work.data(),
+                             true);
+    done = true;
+  }
 #endif
-  if (m.backend == Backend::EigenLDLT) X = m.ldlt.solve(B);
+  if (!done) {
+    const ScopedOmpDynamic omp_dynamic;
+    const ScopedBlasThreads blas_threads(1);  // (see compute)
+#ifdef TBSP_HAVE_CHOLMOD
+    if (m.backend == Backend::Cholmod) X = m.cholmod.solve(B);
+#endif
+    if (m.backend == Backend::EigenLDLT) X = m.ldlt.solve(B);
+  }
   if (!X.allFinite()) throw NumericalFailure("[tbsp::SparseCholesky::solve] the solution is not finite");
-  return X;
+}
+
+void SparseCholesky::setCholmodSolve(bool on) { impl_->cholmod_solve = on; }
+
+std::size_t SparseCholesky::factorNonZeros() const {
+  const Impl& m = *impl_;
+  if (!m.factorized) return 0;
+#ifdef TBSP_HAVE_CHOLMOD
+  if (m.backend == Backend::Cholmod) return m.view.values();
+#endif
+  return std::size_t(m.ldlt.matrixL().nestedExpression().nonZeros()) + std::size_t(m.n);
 }
 
 bool SparseCholesky::isFactorized() const { return impl_->factorized; }

@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <cstddef>
 #include <memory>
 #include <string>
 
@@ -33,6 +34,22 @@ public:
   /// \brief Solves A X = B for every column of B. \pre compute() succeeded.
   /// \throws NumericalFailure if nothing is factorized or the result is not finite.
   Eigen::MatrixXd solve(const Eigen::MatrixXd& B) const;
+  /// \brief The same, into X: X's storage is reused when it already has B's size, so repeated
+  /// solves (interactive dragging) allocate nothing.
+  ///
+  /// With CHOLMOD, both triangular solves run in tbsp's own supernodal kernel: every stored
+  /// factor entry is read once per triangular solve and updates all columns of B at once
+  /// (O(nnz(L)·cols) flops, memory-bound; see docs/benchmarks.md). Not safe to call on one
+  /// object from several threads while compute() runs; concurrent solve() calls are fine.
+  void solve(const Eigen::MatrixXd& B, Eigen::MatrixXd& X) const;
+
+  /// \brief With CHOLMOD: run CHOLMOD's own cholmod_solve (BLAS per supernode) instead of
+  /// tbsp's kernel; for comparisons (bench_deform) and as a fallback. Default false.
+  void setCholmodSolve(bool on);
+
+  /// Stored entries of the factor (CHOLMOD: supernodal blocks, padding included); 0 before
+  /// compute(). Its size in bytes, ×8, is what one solve streams twice.
+  std::size_t factorNonZeros() const;
 
   bool isFactorized() const;
   Eigen::Index rows() const;
