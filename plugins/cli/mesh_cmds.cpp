@@ -239,7 +239,7 @@ void add_mesh_commands(CLI::App& app, CommandTable& table) {
                      "oriented mesh; with --strict any crossing exits 4)");
   validate->add_option("--against", v->against,
                        "reference surface mesh (e.g. the scan a fit was made from): count faces that point into it, probed "
-                       "along each face normal (docs/fitting.md, fold-overs)");
+                       "along each face normal (docs/dev/fitting_experiments.md, fold-overs)");
   validate->add_option("--probe-distance", v->probe,
                        "half-length of each face's probe along its normal, model units (default 0.1 % of the reference's "
                        "bounding-box diagonal)")

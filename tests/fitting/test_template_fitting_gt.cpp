@@ -135,7 +135,7 @@ TEST(TemplateFittingGroundTruth, DetailRoundsSharpenProtrusionsAndKeepTheHole) {
   EXPECT_EQ(b.report.detail_surface_constraints, 0);  // off by default
   EXPECT_GT(b.report.t_detail, 0);
   // issue target 0.3 %: measured 0.266 % (0.864 % without detail rounds); over seeds 1-24
-  // 0.23-0.38 %, 17 of 24 within 0.3 % (docs/fitting.md)
+  // 0.23-0.38 %, 17 of 24 within 0.3 % (docs/dev/fitting_experiments.md)
   EXPECT_LE(b.err.hausdorff_clean_rel, 0.0030);
   EXPECT_LE(b.err.hausdorff_clean_rel, 0.5 * a.err.hausdorff_clean_rel);   // measured ratio 0.31
   EXPECT_LE(b.clean_p99, 0.45 * a.clean_p99);                             // measured 0.124 vs 0.357 %
