@@ -45,10 +45,58 @@ Eigen::MatrixX3d bend_twist_scale(const Eigen::MatrixX3d& V, const ScenarioOptio
   return out;
 }
 
+Eigen::MatrixX3d articulate(const Eigen::MatrixX3d& V, const std::vector<Joint>& joints) {
+  Eigen::MatrixX3d out = V;
+  // each joint's frame moves with the joints before it: track its centre through them
+  std::vector<Eigen::Vector3d> centre(joints.size()), axis(joints.size()), side(joints.size());
+  for (std::size_t j = 0; j < joints.size(); ++j) {
+    centre[j] = joints[j].centre;
+    axis[j] = joints[j].axis.normalized();
+    side[j] = joints[j].side.normalized();
+  }
+  for (std::size_t j = 0; j < joints.size(); ++j) {
+    const Joint& J = joints[j];
+    const double w = std::max(J.falloff, 1e-12);
+    for (Eigen::Index i = 0; i < V.rows(); ++i) {
+      // which side of the joint: measured on the rest shape, so parts keep their membership
+      const double t = std::clamp(((V.row(i).transpose() - J.centre).dot(J.side.normalized()) / w + 1) / 2, 0.0, 1.0);
+      const double s = t * t * (3 - 2 * t);
+      if (s == 0) continue;
+      const Eigen::Matrix3d R = Eigen::AngleAxisd(s * J.angle_deg * M_PI / 180, axis[j]).toRotationMatrix();
+      out.row(i) = (centre[j] + R * (out.row(i).transpose() - centre[j])).transpose();
+    }
+    // later joints on this one's side follow it
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(J.angle_deg * M_PI / 180, axis[j]).toRotationMatrix();
+    for (std::size_t k = j + 1; k < joints.size(); ++k)
+      if ((joints[k].centre - J.centre).dot(J.side.normalized()) > 0) {
+        centre[k] = centre[j] + R * (centre[k] - centre[j]);
+        axis[k] = R * axis[k];
+        side[k] = R * side[k];
+      }
+  }
+  return out;
+}
+
+std::vector<Joint> bunny_head_and_ears(double angle_deg) {
+  Joint head;  // the neck: everything in front of and above it (head, ears)
+  head.centre = Eigen::Vector3d(-0.045, 0.105, -0.02);
+  head.side = Eigen::Vector3d(-1, 1, 0).normalized();
+  head.axis = Eigen::Vector3d::UnitZ();
+  head.falloff = 0.012;
+  head.angle_deg = angle_deg;
+  Joint ears;  // the base of the ears
+  ears.centre = Eigen::Vector3d(-0.045, 0.148, -0.03);
+  ears.side = Eigen::Vector3d::UnitY();
+  ears.axis = Eigen::Vector3d::UnitZ();
+  ears.falloff = 0.008;
+  ears.angle_deg = angle_deg;
+  return {head, ears};
+}
+
 Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
   Scenario s;
   s.templ = templ;
-  s.target = bend_twist_scale(templ.V, o);
+  s.target = bend_twist_scale(o.joints.empty() ? templ.V : articulate(templ.V, o.joints), o);
   s.diag = bbox_diagonal(s.target);
   std::mt19937 rng(o.seed);
   const Eigen::MatrixX3i& F = templ.F;

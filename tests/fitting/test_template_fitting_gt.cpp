@@ -338,3 +338,43 @@ TEST(TemplateFittingGroundTruth, WithoutMarkersARoughlyPlacedTemplateIsAlignedAn
     EXPECT_EQ(o.flipped_vs_truth, 0) << "seed " << seed;
   }
 }
+
+// The articulated ground truth of the fitting-v2 issue (synth::articulate): analytic checks of
+// one joint (rigid on each side, a monotone blend across the falloff) and of a chain (the
+// child's joint turns with its parent).
+TEST(SyntheticArticulation, JointsTurnTheirPartRigidlyAndBlendSmoothly) {
+  Eigen::MatrixX3d V(41, 3);
+  for (int i = 0; i < 41; ++i) V.row(i) << 0.3 * std::sin(i), -1.0 + 0.05 * i, 0.2 * std::cos(i);
+  synth::Joint j;
+  j.centre = Eigen::Vector3d::Zero();
+  j.side = Eigen::Vector3d::UnitY();
+  j.axis = Eigen::Vector3d::UnitZ();
+  j.falloff = 0.1;
+  j.angle_deg = 30;
+  const Eigen::MatrixX3d A = synth::articulate(V, {j});
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(M_PI / 6, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  double last_angle = -1;
+  for (int i = 0; i < 41; ++i) {
+    const Eigen::Vector3d p = V.row(i).transpose(), q = A.row(i).transpose();
+    EXPECT_NEAR(q.norm(), p.norm(), 1e-12) << i;  // a rotation about the centre, whatever the blend
+    if (p.y() <= -0.1) {
+      EXPECT_LT((q - p).norm(), 1e-15) << i;
+    }
+    if (p.y() >= 0.1) {
+      EXPECT_LT((q - R * p).norm(), 1e-12) << i;
+    }
+    const double angle = std::atan2(p.x() * q.y() - p.y() * q.x(), p.x() * q.x() + p.y() * q.y());
+    EXPECT_GE(angle, last_angle - 1e-12) << i;  // monotone along the chain of points
+    last_angle = angle;
+  }
+  synth::Joint child = j;
+  child.centre = Eigen::Vector3d(0, 0.5, 0);
+  const Eigen::MatrixX3d B = synth::articulate(V, {j, child});
+  const Eigen::Vector3d c2 = R * child.centre;  // the child's joint after its parent turned
+  const Eigen::Matrix3d R60 = Eigen::AngleAxisd(M_PI / 3, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  for (int i = 0; i < 41; ++i) {
+    if (V(i, 1) >= 0.6) {
+      EXPECT_LT((B.row(i).transpose() - (c2 + R60 * (V.row(i).transpose() - child.centre))).norm(), 1e-12) << i;
+    }
+  }
+}

@@ -12,6 +12,27 @@
 
 namespace tbsp::synth {
 
+/// \brief One joint of an articulated deformation: the part of the mesh on the positive side
+/// of the plane through `centre` with normal `side` turns by `angle_deg` about the line through
+/// `centre` along `axis`; across ±`falloff` (length) of that plane the angle blends smoothly
+/// (smoothstep), so the surface bends instead of tearing. Joints apply in order (a later
+/// joint's part is moved by the earlier ones first: give parents before children).
+struct Joint {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d side = Eigen::Vector3d::UnitY();
+  double falloff = 0.01;
+  double angle_deg = 0;
+};
+
+/// \brief Applies the joints to V (template coordinates), each about its centre as moved by
+/// the joints before it.
+Eigen::MatrixX3d articulate(const Eigen::MatrixX3d& V, const std::vector<Joint>& joints);
+
+/// \brief Joints of the libigl bunny (bunny.off, the bun_zipper frame): the head with its ears
+/// nods about the neck, then the ears tilt about their base, both by `angle_deg`.
+std::vector<Joint> bunny_head_and_ears(double angle_deg);
+
 struct ScenarioOptions {
   double bend_deg = 60, twist_deg = 60, scale = 2.0;
   Eigen::Vector3d translation = Eigen::Vector3d(0.3, -0.2, 0.1);  // × template bbox diagonal
@@ -22,6 +43,7 @@ struct ScenarioOptions {
   int markers = 20;
   double fragment_offset = 0.0;    // > 0: split the cloud in two halves, shift one by this × diag
   unsigned seed = 1;
+  std::vector<Joint> joints;       // articulation applied before bend / twist / scale (set those to 0 / 1)
 };
 
 struct Scenario {
