@@ -152,7 +152,7 @@ double mesh_volume(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
   return v;
 }
 
-void vlasic_rows(int steps, int size, bool follow_turn) {
+void vlasic_rows(int steps, int size, bool follow_turn, int keyframes, double keyframe_iou) {
   const std::string base = std::string(TBSP_SHARED_DATA_DIR) + "/meshes/CraGL__Hyperspectral-Inverse-Skinning/models/";
   std::printf("\n## Performance capture of the Vlasic meshes (8 views of %dx%d, %d in-between frames per 50 captured frames, %s)\n\n", size, size,
               steps, follow_turn ? "in-betweens follow the body's turn" : "linear in-betweens");
@@ -181,6 +181,10 @@ void vlasic_rows(int steps, int size, bool follow_turn) {
     const Studio st = read_studio(dir + "/studio.yaml");
     const double diag = (key[0].V.colwise().maxCoeff() - key[0].V.colwise().minCoeff()).norm();
     PerformanceCapture pc;
+    PerformanceCaptureOptions po;
+    po.keyframe_interval = keyframes;
+    po.keyframe_iou = keyframe_iou;
+    pc.setOptions(po);
     pc.setCameras(st.cameraList());
     pc.setTemplate(key[0]);
     StudioFrameStream stream(st, {});
@@ -248,6 +252,8 @@ void stereo_rows(int frames, int size) {
 int main(int argc, char** argv) {
   int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0, stereo = 0;
   bool capture_only = false, vlasic_turn = false;
+  int keyframes = 0;
+  double keyframe_iou = 0.98;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--repeats") && i + 1 < argc) repeats = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--capture-frames") && i + 1 < argc) capture_frames = std::max(0, std::atoi(argv[++i]));
@@ -256,14 +262,16 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--vlasic") && i + 1 < argc) vlasic = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--stereo") && i + 1 < argc) stereo = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--vlasic-turn")) vlasic_turn = true;
+    else if (!std::strcmp(argv[i], "--keyframes") && i + 1 < argc) keyframes = std::max(0, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--keyframe-iou") && i + 1 < argc) keyframe_iou = std::atof(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only] [--vlasic STEPS [--vlasic-turn]] [--stereo FRAMES]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only] [--vlasic STEPS [--vlasic-turn] [--keyframes N [--keyframe-iou X]]] [--stereo FRAMES]\n");
       return 2;
     }
   }
   if (capture_only || vlasic > 0 || stereo > 0) {
     if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {1});
-    if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_turn);
+    if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_turn, keyframes, keyframe_iou);
     if (stereo > 0) stereo_rows(stereo, capture_size);
     return 0;
   }

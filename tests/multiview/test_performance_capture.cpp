@@ -153,6 +153,12 @@ TEST(PerformanceCapture, BadInputIsAClearError) {
   bad = PerformanceCaptureOptions{};
   bad.anchor_weight = 0;
   EXPECT_THROW(PerformanceCapture().setOptions(bad), InvalidInput);
+  bad = PerformanceCaptureOptions{};
+  bad.keyframe_interval = -1;
+  EXPECT_THROW(PerformanceCapture().setOptions(bad), InvalidInput);
+  bad = PerformanceCaptureOptions{};
+  bad.keyframe_iou = 1.5;
+  EXPECT_THROW(PerformanceCapture().setOptions(bad), InvalidInput);
 }
 
 TEST(PerformanceCapture, SilhouettesOnlyAndHandleOptimizationRun) {
@@ -160,9 +166,13 @@ TEST(PerformanceCapture, SilhouettesOnlyAndHandleOptimizationRun) {
   // after the refinement on 3 frames: they run, keep the overlap high and the optimizer does not
   // make the overlap worse.
   const Sequence s = make_sequence("perf_capture_modes", 3, 300);
-  for (const int mode : {0, 1, 2}) {
-    const bool optimize = mode == 1, stereo = mode == 2;
+  for (const int mode : {0, 1, 2, 3}) {
+    const bool optimize = mode == 1, stereo = mode == 2, keyframes = mode == 3;
     PerformanceCaptureOptions o;
+    if (keyframes) {  // every tracked frame after the first becomes a keyframe
+      o.keyframe_interval = 1;
+      o.keyframe_iou = 0.5;
+    }
     o.features = mode > 0;  // mode 0 runs on silhouettes alone
     o.optimize_handles = optimize;
     o.stereo_refine = stereo;
@@ -188,6 +198,11 @@ TEST(PerformanceCapture, SilhouettesOnlyAndHandleOptimizationRun) {
       } else if (stereo) {
         EXPECT_GT(fr.stereo_points, 100) << "frame " << f.frame;
         EXPECT_GT(fr.t_stereo, 0.0);
+      } else if (keyframes) {
+        EXPECT_EQ(fr.keyframe, pc.report().frames.size() > 1) << "frame " << f.frame;
+        if (pc.report().frames.size() > 2) {
+          EXPECT_GT(fr.anchor_matches, 0) << "frame " << f.frame;
+        }
       } else {
         EXPECT_EQ(fr.keypoints, 0);
         EXPECT_EQ(fr.stereo_points, 0);

@@ -39,6 +39,8 @@ bool PerformanceCaptureOptions::isValid(std::string* why) const {
   if (!(ratio > 0) || ratio > 1) return fail("ratio must be in (0, 1]");
   if (!finite_pos(max_flow_px)) return fail("max_flow_px must be > 0");
   if (!finite_pos(anchor_weight) || anchor_weight > 100) return fail("anchor_weight must be in (0, 100]");
+  if (keyframe_interval < 0 || keyframe_interval > 10000) return fail("keyframe_interval must be in 0..10000");
+  if (!(keyframe_iou > 0) || keyframe_iou > 1) return fail("keyframe_iou must be in (0, 1]");
   if (!(silhouette_weight > 0) || silhouette_weight > 10) return fail("silhouette_weight must be in (0, 10]");
   if (!finite_pos(search_px)) return fail("search_px must be > 0");
   if (key_handles < 1 || key_handles > 100) return fail("key_handles must be in 1..100");
@@ -66,6 +68,7 @@ struct PerformanceCapture::Impl {
   TriMesh mesh;                    // output of the last frame
   std::vector<detail::LiftedFeatures> prev, anchor;
   int frames = 0;
+  int last_keyframe = 0;
 };
 
 PerformanceCapture::PerformanceCapture() : impl_(new Impl) {}
@@ -475,7 +478,15 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
       const std::size_t K = std::size_t(k);
       I.prev[K] = detail::lift_features(cur[K], fb[K], tracks[K], &model, &cameras_[K]);
     }
-    if (first) I.anchor = I.prev;
+    if (first) {
+      I.anchor = I.prev;
+      I.last_keyframe = I.frames;
+    } else if (o.keyframe_interval > 0 && o.anchor_first_frame && o.anchor_all_views && !fr.failed &&
+               fr.iou_min >= o.keyframe_iou && I.frames - I.last_keyframe >= o.keyframe_interval) {
+      I.anchor.insert(I.anchor.end(), I.prev.begin(), I.prev.end());
+      I.last_keyframe = I.frames;
+      fr.keyframe = true;
+    }
   }
   fr.t_match += seconds_since(t0);
   I.mesh = std::move(model);

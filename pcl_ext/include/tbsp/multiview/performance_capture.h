@@ -80,6 +80,11 @@ struct PerformanceCaptureOptions {
   /// are identified on the first frame's model and cannot drift; frame-to-frame tracks start on
   /// the current model and inherit its error.
   double anchor_weight = 4.0;
+  /// Keyframe anchors: every this many frames at most, a frame whose worst view IoU reaches
+  /// keyframe_iou adds its lifted keypoints to the anchors (with anchor_all_views), so sides of
+  /// the performer the first frame did not show get anchors too. 0 = off; 0..10000.
+  int keyframe_interval = 0;
+  double keyframe_iou = 0.98;      ///< worst view IoU a keyframe needs, (0, 1]
   // silhouettes
   bool silhouettes = true;         ///< rim constraints in the pose step
   double silhouette_weight = 0.5;  ///< weight of a rim constraint relative to a feature, (0, 10]; thesis 0.25–0.5
@@ -106,7 +111,8 @@ struct CaptureFrameReport {
   int frame = 0;
   int keypoints = 0;                 ///< SIFT keypoints, all views
   int temporal_matches = 0;          ///< matches to the previous frame's lifted keypoints
-  int anchor_matches = 0;            ///< matches to the first frame's lifted keypoints
+  int anchor_matches = 0;            ///< matches to the first frame's (and keyframes') lifted keypoints
+  bool keyframe = false;             ///< this frame's keypoints became anchors (keyframe_interval)
   int inliers = 0;                   ///< feature constraints kept by the robust solve (last round)
   int rim_constraints = 0;           ///< last round
   std::vector<double> iou;           ///< per view, of the output mesh
