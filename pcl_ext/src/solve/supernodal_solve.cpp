@@ -67,16 +67,27 @@ TBSP_INLINE void column_dots(const double* col, const double* G, std::ptrdiff_t 
   }
 }
 
+// One supernode's columns k1 .. k1 + nscol - 1, its m row indices (its own columns first) and
+// its column-major m x nscol value block.
+struct Supernode {
+  Supernode(const SupernodalFactorView& L, int sn)
+      : k1(L.super[sn]), nscol(L.super[sn + 1] - L.super[sn]), m(L.pi[sn + 1] - L.pi[sn]), rows(L.s + L.pi[sn]),
+        blk(L.x + L.px[sn]) {}
+  int k1, nscol, m;
+  const int* rows;
+  const double* blk;
+};
+
 // Forward step of one supernode: solve its diagonal block, then subtract its columns from its
 // rows below. Those updates go to Y, or to `buf` (row top[r]) when the row belongs to the top
 // of the tree that two parts share.
 template <int K>
 TBSP_INLINE void forward_supernode(const SupernodalFactorView& L, int sn, double* Y, double* G, int k, const int* top,
                        double* buf) {
-  const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1;
-  const int* rows = L.s + L.pi[sn];
-  const int m = L.pi[sn + 1] - L.pi[sn];
-  const double* blk = L.x + L.px[sn];
+  const Supernode S(L, sn);
+  const int k1 = S.k1, nscol = S.nscol, m = S.m;
+  const int* rows = S.rows;
+  const double* blk = S.blk;
   for (int c = 0; c < k; ++c) {
     double* g = G + std::ptrdiff_t(c) * m;
     for (int i = 0; i < nscol; ++i) g[i] = Y[std::ptrdiff_t(k1 + i) * k + c];
@@ -117,10 +128,10 @@ TBSP_INLINE void forward_supernode(const SupernodalFactorView& L, int sn, double
 // Backward step of one supernode: its rows below are final; solve for its own columns.
 template <int K>
 TBSP_INLINE void backward_supernode(const SupernodalFactorView& L, int sn, double* Y, double* G, int k) {
-  const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1;
-  const int* rows = L.s + L.pi[sn];
-  const int m = L.pi[sn + 1] - L.pi[sn];
-  const double* blk = L.x + L.px[sn];
+  const Supernode S(L, sn);
+  const int k1 = S.k1, nscol = S.nscol, m = S.m;
+  const int* rows = S.rows;
+  const double* blk = S.blk;
   for (int c = 0; c < k; ++c) {
     double* g = G + std::ptrdiff_t(c) * m;
     for (int i = nscol; i < m; ++i) g[i] = Y[std::ptrdiff_t(rows[i]) * k + c];
