@@ -316,9 +316,6 @@ SupernodalPlan make_supernodal_plan(const SupernodalFactorView& L) {
     }
   }
   plan.top_rows = int(plan.top_row.size());
-  for (int p = 0; p < 2; ++p)
-    for (int sn : plan.part[p]) plan.part_work[p] += double(L.px[sn + 1] - L.px[sn]);
-  for (int sn : plan.top) plan.top_work += double(L.px[sn + 1] - L.px[sn]);
   return plan;
 }
 

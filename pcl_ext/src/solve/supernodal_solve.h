@@ -43,7 +43,6 @@ struct SupernodalPlan {
   std::vector<int> top_index;  ///< per column: its index among the top's columns, or -1
   std::vector<int> top_row;    ///< the top's columns
   int top_rows = 0;
-  double part_work[2] = {0, 0}, top_work = 0;  ///< stored values in each (for reports)
 };
 
 /// \brief Builds the split (O(n + nsuper log nsuper)); the factor's structure only.
