@@ -47,5 +47,6 @@ void add_mocap_commands(CLI::App& app, CommandTable& table);    // mocap
 void add_stereo_commands(CLI::App& app, CommandTable& table);   // stereo, refine-stereo, refine-silhouette
 void add_animate_commands(CLI::App& app, CommandTable& table);  // animate
 void add_perf_capture_commands(CLI::App& app, CommandTable& table);  // capture
+void add_pipeline_commands(CLI::App& app, CommandTable& table);  // plugins, run
 
 }  // namespace tbsp::cli

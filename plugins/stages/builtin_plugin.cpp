@@ -1,0 +1,9 @@
+// The built-in stage plugin (libtbsp_stages.so): readers, PCL filters, template fitting, writers.
+// Loaded from the plugin path like any third-party plugin (docs/plugins.md).
+#include "stage_util.h"
+
+TBSP_STAGE_PLUGIN(registry) {
+  tbsp::pipeline::builtin::register_io_stages(registry);
+  tbsp::pipeline::builtin::register_pcl_stages(registry);
+  tbsp::pipeline::builtin::register_fit_stages(registry);
+}

@@ -1,0 +1,83 @@
+// Built-in stage "fit": tbsp::TemplateFitting (pcl_ext/fitting) on each frame's cloud, warm-started
+// from the previous frame's fit. Only parameter mapping and the warm start live here.
+#include "stage_util.h"
+#include "tbsp/fitting/template_fitting.h"
+#include "tbsp/plugins/fit_json.h"
+
+namespace tbsp::pipeline::builtin {
+namespace {
+
+class Fit : public Stage {
+public:
+  explicit Fit(const Params& p) : warm_(p.boolean("warm_start")) {
+    if (!p.text("markers").empty()) markers_ = load_markers_json(p.text("markers"));
+    params_.max_match_distance = p.real("r_max");
+    params_.max_iterations = int(p.integer("iterations"));
+    params_.detail_rounds = int(p.integer("detail_rounds"));
+    params_.estimate_scale = p.boolean("estimate_scale");
+    params_.refine_rotations = p.boolean("refine_rotations");
+  }
+  Ports process(FrameContext& ctx, const Ports& in) override {
+    const Data& cloud = in.at("cloud");
+    const bool warm = warm_ && last_;
+    const TriMesh& templ = warm ? *last_ : *in.at("template").mesh;
+    FitParameters prm = params_;
+    if (warm) prm.estimate_scale = false;  // the last fit already has the scan's size
+    TriMesh out;
+    auto run = [&](auto& fit) {
+      fit.setInputTemplate(templ);
+      // markers steer the first frame; warm-started frames start from the last fit instead, whose
+      // vertices no longer sit where the markers' template vertices did
+      if (!warm) fit.setMarkers(markers_);
+      fit.setParameters(prm);
+      fit.setProgressCallback(ctx.progress);
+      return fit.reconstruct(out);
+    };
+    FitReport rep;
+    if (cloud.has_normals) {
+      TemplateFitting<pcl::PointNormal> fit;
+      fit.setInputCloud(cloud.cloud);
+      rep = run(fit);
+    } else {
+      pcl::PointCloud<pcl::PointXYZ>::Ptr xyz(new pcl::PointCloud<pcl::PointXYZ>);
+      xyz->reserve(cloud.cloud->size());
+      for (const auto& q : *cloud.cloud) xyz->push_back(pcl::PointXYZ(q.x, q.y, q.z));
+      TemplateFitting<pcl::PointXYZ> fit;
+      fit.setInputCloud(xyz);
+      rep = run(fit);
+    }
+    ctx.numbers = {{"hausdorff_rel", rep.hausdorff_rel}, {"rms_rel", rep.rms / std::max(rep.bbox_diagonal, 1e-300)},
+                   {"p99_rel", rep.p99 / std::max(rep.bbox_diagonal, 1e-300)}, {"iterations", double(rep.iterations)},
+                   {"scale", rep.scale}, {"coverage_points", rep.coverage_points}, {"warm_start", warm ? 1.0 : 0.0}};
+    auto mesh = std::make_shared<const TriMesh>(std::move(out));
+    if (warm_) last_ = mesh;
+    return {{"mesh", Data::of(mesh)}};
+  }
+
+private:
+  bool warm_;
+  std::vector<FitMarker> markers_;
+  FitParameters params_;
+  std::shared_ptr<const TriMesh> last_;
+};
+
+}  // namespace
+
+void register_fit_stages(Registry& r) {
+  StageInfo s{"fit", "tbsp::TemplateFitting: deforms the template onto each frame's cloud (thesis ch. 5; docs/fitting.md)"};
+  s.params = {
+      ParamSpec::input_path("markers", "markers JSON (docs/fit_json.md) for the first frame; without: rigid + scale alignment first", false),
+      ParamSpec::boolean("warm_start", true, "start each frame from the previous frame's fit (same connectivity)"),
+      ParamSpec::real("r_max", "0", "final match radius r_max, cloud units (0: from the data)", 0, 1e30),
+      ParamSpec::integer("iterations", "15", "max iterations of the iterative fit", 1, 1000),
+      ParamSpec::integer("detail_rounds", "0", "extra detail rounds after the fit", 0, 100),
+      ParamSpec::boolean("estimate_scale", true, "estimate a global scale on the first frame (§5.2)"),
+      ParamSpec::boolean("refine_rotations", false, "re-estimate the rotation field from the fit")};
+  s.inputs = {{"cloud", DataType::Cloud, "the scan of this frame"},
+              {"template", DataType::Mesh, "the template (used by the first frame, or every frame without warm_start)"}};
+  s.outputs = {{"mesh", DataType::Mesh, "the fitted template"}};
+  s.frame_ordered = true;
+  r.add(s, [](const Params& p) { return std::make_unique<Fit>(p); });
+}
+
+}  // namespace tbsp::pipeline::builtin

@@ -1,0 +1,257 @@
+// Built-in sources and sinks: read-cloud, read-mesh, read-depth, write-cloud, write-mesh,
+// render-png. They wrap capture_io's readers and writers (no file-format code here).
+#include <pcl/conversions.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <sstream>
+
+#include "stage_util.h"
+#include "tbsp/io/cloud_io.h"
+#include "tbsp/io/depth_io.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/io/studio.h"
+#include "tbsp/plugins/preview_render.h"
+
+namespace fs = std::filesystem;
+
+namespace tbsp::pipeline::builtin {
+namespace {
+
+bool is_pattern(const std::string& p) { return p.find('%') != std::string::npos; }
+
+// Frames of a %d file pattern: every frame in [first, last] whose file exists; with last < 0,
+// from `first` up to the first missing file.
+std::vector<int> pattern_frames(const std::string& pattern, long long first, long long last) {
+  std::vector<int> f;
+  std::error_code ec;
+  const long long stop = last >= 0 ? last : first + 10000000;
+  for (long long i = first; i <= stop; ++i) {
+    if (fs::exists(expand_frame_pattern(pattern, int(i)), ec)) f.push_back(int(i));
+    else if (last < 0) break;
+  }
+  if (f.empty())
+    throw FileError("'" + pattern + "': no file for frame " + std::to_string(first) + (last >= 0 ? " to " + std::to_string(last) : "") +
+                    " (the pattern's %d is the frame number; set 'first'/'last' to the numbers on disk)");
+  return f;
+}
+
+class ReadCloud : public Stage {
+public:
+  explicit ReadCloud(const Params& p) : path_(p.text("path")), first_(p.integer("first")), last_(p.integer("last")) {}
+  std::vector<int> frames() override { return is_pattern(path_) ? pattern_frames(path_, first_, last_) : std::vector<int>{}; }
+  Ports process(FrameContext& ctx, const Ports&) override {
+    if (!is_pattern(path_) && cached_.cloud) return {{"cloud", cached_}};
+    const std::string file = is_pattern(path_) ? expand_frame_pattern(path_, ctx.frame) : path_;
+    bool normals = false;
+    auto c = read_cloud_normals(file, &normals);
+    CloudN::Ptr kept = finite_points(*c);
+    if (normals)  // keep the normals of the finite points
+      for (std::size_t i = 0, j = 0; i < c->size(); ++i) {
+        const auto& q = (*c)[i];
+        if (std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z)) {
+          (*kept)[j].normal_x = q.normal_x; (*kept)[j].normal_y = q.normal_y; (*kept)[j].normal_z = q.normal_z;
+          ++j;
+        }
+      }
+    if (kept->empty()) throw InvalidInput("'" + file + "': the cloud has no finite point");
+    Data d = Data::of(kept, normals);
+    if (!is_pattern(path_)) cached_ = d;
+    return {{"cloud", d}};
+  }
+
+private:
+  std::string path_;
+  long long first_, last_;
+  Data cached_;
+};
+
+class ReadMesh : public Stage {
+public:
+  explicit ReadMesh(const Params& p) : path_(p.text("path")), first_(p.integer("first")), last_(p.integer("last")) {}
+  std::vector<int> frames() override { return is_pattern(path_) ? pattern_frames(path_, first_, last_) : std::vector<int>{}; }
+  Ports process(FrameContext& ctx, const Ports&) override {
+    if (!is_pattern(path_) && cached_) return {{"mesh", Data::of(cached_)}};
+    auto m = std::make_shared<const TriMesh>(read_mesh(is_pattern(path_) ? expand_frame_pattern(path_, ctx.frame) : path_));
+    if (!is_pattern(path_)) cached_ = m;
+    return {{"mesh", Data::of(m)}};
+  }
+
+private:
+  std::string path_;
+  long long first_, last_;
+  std::shared_ptr<const TriMesh> cached_;
+};
+
+// .oni recordings (OpenNI2) or folders of 16-bit depth images.
+class ReadDepth : public Stage {
+public:
+  explicit ReadDepth(const Params& p) : path_(p.text("path")), scale_(p.real("depth_scale")) {
+    if (fs::path(path_).extension() == ".oni") return;
+    if (!fs::is_directory(path_)) throw FileError("'" + path_ + "': neither an .oni recording nor a folder of depth images");
+    for (const auto& e : fs::directory_iterator(path_)) {
+      const std::string ext = e.path().extension().string();
+      if (ext == ".png" || ext == ".pgm" || ext == ".tif" || ext == ".tiff") files_.push_back(e.path().string());
+    }
+    std::sort(files_.begin(), files_.end());
+    if (files_.empty()) throw FileError("'" + path_ + "': no depth images (.png .pgm .tif .tiff) in this folder");
+    const std::string in = p.text("intrinsics");
+    char c1 = 0, c2 = 0, c3 = 0;
+    std::istringstream is(in);
+    if (in.empty() || !(is >> K_.fx >> c1 >> K_.fy >> c2 >> K_.cx >> c3 >> K_.cy) || c1 != ',' || c2 != ',' || c3 != ',' || K_.fx <= 0 ||
+        K_.fy <= 0)
+      throw InvalidInput("a folder of depth images needs 'intrinsics: fx,fy,cx,cy' in pixels (e.g. 525,525,319.5,239.5); got '" + in + "'");
+  }
+  std::vector<int> frames() override {
+    std::vector<int> f;
+    if (files_.empty()) {
+      if (!OniReader::available())
+        throw InvalidInput("'" + path_ + "': this tbsp was built without OpenNI2, so .oni recordings cannot be read (install libopenni2-dev and rebuild)");
+      oni_ = std::make_unique<OniReader>(path_);
+      for (int i = 0; i < oni_->info().depth_frames; ++i) f.push_back(i);
+      if (f.empty()) throw FileError("'" + path_ + "': the recording has no depth frame");
+    } else {
+      for (std::size_t i = 0; i < files_.size(); ++i) f.push_back(int(i));
+    }
+    return f;
+  }
+  Ports process(FrameContext& ctx, const Ports&) override {
+    CloudN::Ptr c;
+    if (oni_) {
+      OniFrame fr;
+      bool got = false;
+      while (oni_->next(fr))
+        if (fr.index == ctx.frame) { got = true; break; }
+      if (!got || fr.depth.empty()) throw FileError("'" + path_ + "': depth frame " + std::to_string(ctx.frame) + " could not be read");
+      c = finite_points(depth_to_cloud(fr.depth, oni_->info().depth_intrinsics, oni_->info().depth_scale));
+    } else {
+      const std::string& f = files_.at(std::size_t(ctx.frame));
+      c = finite_points(depth_to_cloud(read_depth_image(f), K_, scale_));
+    }
+    if (c->empty()) throw InvalidInput("'" + path_ + "' frame " + std::to_string(ctx.frame) + ": no valid depth pixel");
+    return {{"cloud", Data::of(c, false)}};
+  }
+
+private:
+  std::string path_;
+  double scale_;
+  DepthIntrinsics K_;
+  std::vector<std::string> files_;
+  std::unique_ptr<OniReader> oni_;
+};
+
+std::string out_path(const std::string& pattern, int frame) { return is_pattern(pattern) ? expand_frame_pattern(pattern, frame) : pattern; }
+
+class WriteMesh : public Stage {
+public:
+  explicit WriteMesh(const Params& p) : path_(p.text("path")), binary_(p.boolean("binary")) {}
+  Ports process(FrameContext& ctx, const Ports& in) override {
+    MeshWriteOptions o;
+    o.binary = binary_;
+    write_mesh(ctx.stage_output(out_path(path_, ctx.frame)), *in.at("mesh").mesh, o, mesh_format_from_path(path_));
+    return {};
+  }
+
+private:
+  std::string path_;
+  bool binary_;
+};
+
+class WriteCloud : public Stage {
+public:
+  explicit WriteCloud(const Params& p) : path_(p.text("path")), binary_(p.boolean("binary")) {}
+  Ports process(FrameContext& ctx, const Ports& in) override {
+    const Data& d = in.at("cloud");
+    pcl::PCLPointCloud2 blob;
+    if (d.has_normals) {
+      pcl::toPCLPointCloud2(*d.cloud, blob);
+    } else {
+      pcl::PointCloud<pcl::PointXYZ> xyz;
+      xyz.reserve(d.cloud->size());
+      for (const auto& q : *d.cloud) xyz.push_back(pcl::PointXYZ(q.x, q.y, q.z));
+      pcl::toPCLPointCloud2(xyz, blob);
+    }
+    write_cloud(ctx.stage_output(out_path(path_, ctx.frame)), blob, binary_);
+    return {};
+  }
+
+private:
+  std::string path_;
+  bool binary_;
+};
+
+class RenderPng : public Stage {
+public:
+  explicit RenderPng(const Params& p) : path_(p.text("path")) {
+    o_.azimuth_deg = p.real("azimuth");
+    o_.elevation_deg = p.real("elevation");
+    o_.panel_width = o_.panel_height = int(p.integer("size"));
+  }
+  Ports process(FrameContext& ctx, const Ports& in) override {
+    RenderPanel panel(*in.at("mesh").mesh, ctx.node + " frame " + std::to_string(ctx.frame));
+    if (auto it = in.find("cloud"); it != in.end()) {
+      const auto& c = *it->second.cloud;
+      panel.points.resize(Eigen::Index(c.size()), 3);
+      for (std::size_t i = 0; i < c.size(); ++i) panel.points.row(Eigen::Index(i)) << c[i].x, c[i].y, c[i].z;
+    }
+    render_panels_png(ctx.stage_output(out_path(path_, ctx.frame)), {panel}, o_);
+    return {};
+  }
+
+private:
+  std::string path_;
+  RenderOptions o_;
+};
+
+}  // namespace
+
+void register_io_stages(Registry& r) {
+  const ParamSpec first = ParamSpec::integer("first", "0", "with a %d pattern: first frame number", 0, 1e9);
+  const ParamSpec last = ParamSpec::integer("last", "-1", "with a %d pattern: last frame number (-1: up to the first missing file)", -1, 1e9);
+  {
+    StageInfo s{"read-cloud", "reads a point cloud (.pcd .ply .obj .off .vtk) per frame, or one cloud used by every frame"};
+    s.params = {ParamSpec::input_path("path", "the cloud file, or a pattern such as scans/%04d.pcd (frame source)", true), first, last};
+    s.outputs = {{"cloud", DataType::Cloud, "the finite points (with the file's normals when it has them)"}};
+    r.add(s, [](const Params& p) { return std::make_unique<ReadCloud>(p); });
+  }
+  {
+    StageInfo s{"read-mesh", "reads a triangle mesh (.ply .obj .off .vtk) per frame, or one mesh used by every frame (e.g. a template)"};
+    s.params = {ParamSpec::input_path("path", "the mesh file, or a pattern such as seq/%04d.ply (frame source)", true), first, last};
+    s.outputs = {{"mesh", DataType::Mesh, "the mesh"}};
+    r.add(s, [](const Params& p) { return std::make_unique<ReadMesh>(p); });
+  }
+  {
+    StageInfo s{"read-depth", "depth-sensor replay: an OpenNI .oni recording or a folder of 16-bit depth images, one cloud per frame"};
+    s.params = {ParamSpec::input_path("path", ".oni file or folder of depth images (.png .pgm .tif .tiff, sorted by name)", true),
+                ParamSpec::text("intrinsics", "", "folders: fx,fy,cx,cy in pixels (.oni: from the recording)"),
+                ParamSpec::real("depth_scale", "0.001", "folders: metres per raw depth unit (TUM: 0.0002)", 1e-9, 1e3)};
+    s.outputs = {{"cloud", DataType::Cloud, "the valid depth pixels back-projected, metres, camera frame"}};
+    s.frame_ordered = true;  // an .oni recording is read forwards
+    r.add(s, [](const Params& p) { return std::make_unique<ReadDepth>(p); });
+  }
+  {
+    StageInfo s{"write-mesh", "writes the mesh of each frame (.ply .obj .off .vtk); files appear only when the whole run succeeded"};
+    s.params = {ParamSpec::output_path("path", "output file; a %04d pattern names one file per frame"),
+                ParamSpec::boolean("binary", true, "binary PLY (false: ASCII)")};
+    s.inputs = {{"mesh", DataType::Mesh, "the mesh to write"}};
+    r.add(s, [](const Params& p) { return std::make_unique<WriteMesh>(p); });
+  }
+  {
+    StageInfo s{"write-cloud", "writes the cloud of each frame (.pcd .ply); files appear only when the whole run succeeded"};
+    s.params = {ParamSpec::output_path("path", "output file; a %04d pattern names one file per frame"),
+                ParamSpec::boolean("binary", true, "binary PCD/PLY (false: ASCII)")};
+    s.inputs = {{"cloud", DataType::Cloud, "the cloud to write (normals written when it has them)"}};
+    r.add(s, [](const Params& p) { return std::make_unique<WriteCloud>(p); });
+  }
+  {
+    StageInfo s{"render-png", "renders the mesh of each frame (and optionally a cloud as dots) to a PNG"};
+    s.params = {ParamSpec::output_path("path", "PNG file; a %04d pattern names one file per frame"),
+                ParamSpec::real("azimuth", "30", "view azimuth, degrees", -360, 360),
+                ParamSpec::real("elevation", "20", "view elevation, degrees", -90, 90),
+                ParamSpec::integer("size", "480", "image width and height, pixels", 16, 4096)};
+    s.inputs = {{"mesh", DataType::Mesh, "the mesh to draw"}, {"cloud", DataType::Cloud, "points drawn as dots", true}};
+    r.add(s, [](const Params& p) { return std::make_unique<RenderPng>(p); });
+  }
+}
+
+}  // namespace tbsp::pipeline::builtin
