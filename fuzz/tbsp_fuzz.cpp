@@ -34,6 +34,7 @@
 #include "tbsp/plugins/fit_json.h"
 #include "tbsp/plugins/json_file.h"
 #include "tbsp/plugins/marker_map_json.h"
+#include "tbsp/plugins/pipeline.h"
 #include "tbsp/plugins/tet_job_json.h"
 #include "tbsp/plugins/texture_json.h"
 
@@ -50,6 +51,40 @@ TriMesh octahedron() {
   m.F.resize(8, 3);
   m.F << 0, 2, 4, 2, 1, 4, 1, 3, 4, 3, 0, 4, 2, 0, 5, 1, 2, 5, 3, 1, 5, 0, 3, 5;
   return m;
+}
+
+// Stages of every parameter and port kind for the pipeline validator (their makers are never
+// called: parse_pipeline only reads the metadata).
+const pipeline::Registry& fuzz_registry() {
+  static pipeline::Registry* r = [] {
+    using namespace tbsp::pipeline;
+    auto* reg = new Registry;
+    auto never = [](const Params&) -> std::unique_ptr<Stage> { return nullptr; };
+    StageInfo src{"read-cloud", "source"};
+    src.params = {ParamSpec::input_path("path", "file", true), ParamSpec::integer("first", "0", "first", 0, 1e9)};
+    src.outputs = {{"cloud", DataType::Cloud, "cloud"}};
+    reg->add(src, never);
+    StageInfo mesh{"read-mesh", "source"};
+    mesh.params = {ParamSpec::input_path("path", "file", false)};
+    mesh.outputs = {{"mesh", DataType::Mesh, "mesh"}};
+    reg->add(mesh, never);
+    StageInfo filt{"pcl.pass-through", "filter"};
+    filt.params = {ParamSpec::text("field", "z", "axis", {"x", "y", "z"}), ParamSpec::real("min", "0", "lo", -1e30, 1e30),
+                   ParamSpec::boolean("negative", false, "flip")};
+    filt.inputs = {{"cloud", DataType::Cloud, "in"}};
+    filt.outputs = {{"cloud", DataType::Cloud, "out"}};
+    reg->add(filt, never);
+    StageInfo fit{"fit", "two inputs"};
+    fit.inputs = {{"cloud", DataType::Cloud, "in"}, {"template", DataType::Mesh, "t"}, {"extra", DataType::Cloud, "x", true}};
+    fit.outputs = {{"mesh", DataType::Mesh, "out"}, {"cloud", DataType::Cloud, "out2"}};
+    reg->add(fit, never);
+    StageInfo sink{"write-mesh", "sink"};
+    sink.params = {ParamSpec::output_path("path", "out")};
+    sink.inputs = {{"mesh", DataType::Mesh, "in"}};
+    reg->add(sink, never);
+    return reg;
+  }();
+  return *r;
 }
 
 struct Target {
@@ -109,6 +144,7 @@ const std::map<std::string, Target>& targets() {
                      }}},
       {"texture", {"t.json", [](const std::string& p) { parse_texture_constraints(load_json_file(p), p); }}},
       {"marker_map", {"map.json", [](const std::string& p) { load_marker_map_json(p); }}},
+      {"pipeline", {"p.yaml", [](const std::string& p) { pipeline::load_pipeline(p, fuzz_registry()); }}},
   };
   return t;
 }
