@@ -303,7 +303,8 @@ Pipeline parse_pipeline(const std::string& text, const std::string& base_dir, co
           throw PipelineError(file, line, "'" + ref.first + "' (" + src.name + ") has no output '" + ref.second + "'; its outputs: " + join(names));
         }
       }
-      const PortSpec& in = *std::find_if(info.inputs.begin(), info.inputs.end(), [&](const PortSpec& p) { return p.name == port; });
+      const std::string& port_name = port;  // (C++17: lambdas cannot capture structured bindings)
+      const PortSpec& in = *std::find_if(info.inputs.begin(), info.inputs.end(), [&](const PortSpec& p) { return p.name == port_name; });
       if (in.type != out->type)
         throw PipelineError(file, line, "type mismatch: input '" + port + "' of '" + r.node.id + "' (" + info.name + ") takes a " +
                                             to_string(in.type) + ", but '" + ref.first + "." + out->name + "' gives a " + to_string(out->type) +
