@@ -4,6 +4,7 @@
 #include <memory>
 
 #include "command.h"
+#include "pipeline_mpi.h"
 #include "progress_bar.h"
 #include "tbsp/io/atomic_file.h"
 #include "tbsp/plugins/pipeline.h"
@@ -42,7 +43,7 @@ int cmd_plugins(const PluginArgs& a) {
 struct RunArgs {
   std::string pipeline;
   std::vector<std::string> plugin_files;
-  int first = -1, last = -1;
+  int first = -1, last = -1, threads = 0;
   bool check = false, quiet = false;
 };
 
@@ -56,15 +57,24 @@ int cmd_run(const RunArgs& a) {
     std::cout << "\n";
     return 0;
   }
-  ProgressBar bar(!a.quiet);
   tbsp::pipeline::RunOptions o;
   o.first = a.first;
   o.last = a.last;
+  o.threads = a.threads;
+  if (launched_by_mpirun()) {
+#ifdef TBSP_WITH_MPI
+    return run_distributed(p, reg, o, a.quiet);
+#else
+    throw tbsp::InvalidInput("started by mpirun, but this tbsp was built without Open MPI, so every rank would run every frame: "
+                             "install libopenmpi-dev and rebuild, or run without mpirun");
+#endif
+  }
+  ProgressBar bar(!a.quiet);
   o.progress = bar.callback();
   const tbsp::pipeline::RunReport r = tbsp::pipeline::run_pipeline(p, reg, o);
   bar.finish();
   if (!a.quiet) {
-    std::cout << a.pipeline << ": " << r.frames.size() << " frames in " << r.seconds << " s ("
+    std::cout << a.pipeline << ": " << r.frames.size() << " frames on " << r.threads << " thread(s) in " << r.seconds << " s ("
               << (r.seconds > 0 ? double(r.frames.size()) / r.seconds : 0.0) << " frames/s), " << r.outputs.size() << " files written\n";
   }
   return 0;
@@ -86,6 +96,9 @@ void add_pipeline_commands(CLI::App& app, CommandTable& table) {
   run->add_option("--plugin", ra->plugin_files, "also load this plugin library (.so); repeatable")->check(CLI::ExistingFile);
   run->add_option("--first", ra->first, "first frame (overrides the file's 'frames:')")->check(CLI::NonNegativeNumber);
   run->add_option("--last", ra->last, "last frame, inclusive")->check(CLI::NonNegativeNumber);
+  run->add_option("--threads", ra->threads,
+                  "frame-parallel worker threads (0 = one per core when no stage keeps state across frames; under mpirun: 1 per rank)")
+      ->check(CLI::NonNegativeNumber);
   run->add_flag("--check", ra->check, "validate the file and exit (nothing is read or written)");
   run->add_flag("-q,--quiet", ra->quiet, "no progress bar or summary");
   table.push_back({run, [ra] { return cmd_run(*ra); }});

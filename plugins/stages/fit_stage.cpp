@@ -54,6 +54,8 @@ public:
     return {{"mesh", Data::of(mesh)}};
   }
 
+  bool keeps_state() const override { return warm_; }
+
 private:
   bool warm_;
   std::vector<FitMarker> markers_;

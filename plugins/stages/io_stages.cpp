@@ -131,6 +131,8 @@ public:
     if (c->empty()) throw InvalidInput("'" + path_ + "' frame " + std::to_string(ctx.frame) + ": no valid depth pixel");
     return {{"cloud", Data::of(c, false)}};
   }
+  // an .oni recording is read forwards by one reader; image folders allow any frame order
+  bool keeps_state() const override { return files_.empty(); }
 
 private:
   std::string path_;
@@ -226,7 +228,7 @@ void register_io_stages(Registry& r) {
                 ParamSpec::text("intrinsics", "", "folders: fx,fy,cx,cy in pixels (.oni: from the recording)"),
                 ParamSpec::real("depth_scale", "0.001", "folders: metres per raw depth unit (TUM: 0.0002)", 1e-9, 1e3)};
     s.outputs = {{"cloud", DataType::Cloud, "the valid depth pixels back-projected, metres, camera frame"}};
-    s.frame_ordered = true;  // an .oni recording is read forwards
+    s.frame_ordered = true;  // .oni recordings: read forwards by one reader (see keeps_state)
     r.add(s, [](const Params& p) { return std::make_unique<ReadDepth>(p); });
   }
   {

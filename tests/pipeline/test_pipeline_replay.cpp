@@ -87,5 +87,29 @@ TEST(PipelineReplay, StudioRangeScansFitEveryFrameWarmStarted) {
     EXPECT_LT(mean, 0.005) << "frame " << f;  // measured 0.36-0.42 %
     EXPECT_EQ(rep["frames"][f]["numbers"]["fit"]["warm_start"].get<double>(), f > 0 ? 1.0 : 0.0);
   }
+  // a warm-started pipeline cannot split its frames over threads
+  RunOptions two;
+  two.threads = 2;
+  EXPECT_THROW(run_pipeline(load_pipeline((dir / "studio_scan_fit.yaml").string(), reg), reg, two), tbsp::InvalidInput);
+
+  // without warm start, two frame threads give the bits of one (each worker has its own stages;
+  // BLAS runs single-threaded per worker: OpenBLAS's pool is not safe for concurrent callers)
+  std::string cold = read_all(dir / "studio_scan_fit.yaml");
+  const std::string conn = "inputs: {cloud: thinned, template: template}";
+  ASSERT_NE(cold.find(conn), std::string::npos);
+  cold.replace(cold.find(conn), conn.size(), conn + "\n    params: {warm_start: false}");
+  for (int t : {1, 2}) {
+    std::string y = cold;
+    for (std::size_t at; (at = y.find("out/")) != std::string::npos;) y.replace(at, 4, "t" + std::to_string(t) + "/");
+    RunOptions o;
+    o.threads = t;
+    const RunReport rt = run_pipeline(parse_pipeline(y, dir.string(), "cold.yaml", reg), reg, o);
+    EXPECT_EQ(rt.threads, t);
+  }
+  for (int f = 0; f < 6; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "fit_%04d.ply", f);
+    EXPECT_EQ(read_all(dir / "t1" / name), read_all(dir / "t2" / name)) << name;
+  }
   fs::remove_all(dir);
 }

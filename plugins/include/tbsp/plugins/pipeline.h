@@ -60,7 +60,19 @@ Pipeline load_pipeline(const std::string& path, const Registry& registry);
 
 struct RunOptions {
   int first = -1, last = -1;  ///< frame range override (inclusive; -1 = the file's / all)
-  ProgressCallback progress;  ///< fraction of frames done, "frame F: node"; false cancels
+  ProgressCallback progress;  ///< fraction of this process's frames done, "frame F node: ..."; false cancels
+  /// Frame-parallel share (MPI ranks, see docs/pipelines.md): this process runs the frames at
+  /// positions k of the frame list with k % ranks == rank. Default: all frames.
+  int rank = 0, ranks = 1;
+  /// Worker threads, each with its own stage objects, taking frames k % threads (within this
+  /// process's share); each worker's stages get hardware threads / threads OpenMP threads.
+  /// 0 = one per hardware thread when no stage keeps state across frames, else 1.
+  int threads = 1;
+  /// false: outputs stay staged (RunReport::staged) for the caller to gather and commit, and the
+  /// report file is not written (MPI rank 0 does both for all ranks).
+  bool commit = true;
+  /// Folder for staged files ("" = next to each target). MPI ranks other than 0 stage privately.
+  std::string stage_dir;
 };
 
 /// Per-frame timings and the numbers stages noted (FrameContext::numbers).
@@ -70,18 +82,38 @@ struct FrameReport {
   std::map<std::string, double> node_seconds;                   ///< node id -> s
   std::map<std::string, std::map<std::string, double>> numbers;  ///< node id -> notes
 };
+/// A sink's output waiting to be renamed onto its target.
+struct StagedFile {
+  std::string temp, target;
+};
 struct RunReport {
-  std::vector<FrameReport> frames;
+  std::vector<FrameReport> frames;   ///< the frames run by this process, by frame number
+  int total_frames = 0;              ///< frames of the whole run (all ranks)
   std::vector<std::string> outputs;  ///< files written (after the rename)
+  std::vector<StagedFile> staged;    ///< with RunOptions::commit = false: not yet renamed
+  int threads = 1;                   ///< worker threads used
   double seconds = 0;
 };
 
-/// Runs the pipeline: creates one Stage per node, takes the frame list from the frame sources
+/// Runs the pipeline: creates the Stage objects, takes the frame list from the frame sources
 /// (their intersection, restricted to the range; one frame numbered 0 without any source), and
 /// streams the frames one at a time through the nodes. Outputs are staged and renamed onto their
 /// targets only when every frame succeeded; a failure removes them and rethrows with
 /// "frame F, node 'id' (line L): ..." in front. Writes the report JSON when the file asks.
+/// \throws InvalidInput when `ranks` or `threads` > 1 and a stage keeps state from frame to
+/// frame (naming the node; such pipelines run in order in one worker).
 RunReport run_pipeline(const Pipeline& pipeline, const Registry& registry, const RunOptions& options = {});
+
+/// The node ids of stages that keep state from frame to frame (StageInfo::frame_ordered and the
+/// stage object agrees, e.g. `fit` with warm_start), for the given parameters.
+std::vector<std::string> stateful_nodes(const Pipeline& pipeline, const Registry& registry);
+
+/// The run report as JSON text (frames sorted by number): what `report:` receives.
+std::string run_report_json(const Pipeline& pipeline, const RunReport& report);
+/// Renames staged files onto their targets, in order; returns the targets. \throws FileError.
+std::vector<std::string> commit_staged(const std::vector<StagedFile>& files);
+/// Removes staged files (no error when one is already gone).
+void discard_staged(const std::vector<StagedFile>& files);
 
 /// The stage list as Markdown (docs/stages.md is generated with it) or plain text.
 std::string describe_stages(const Registry& registry, bool markdown);

@@ -236,6 +236,10 @@ public:
   /// output port with its declared type. Throw InvalidInput (bad data) or NumericalFailure; the
   /// runner adds the frame number and node to the message.
   virtual Ports process(FrameContext& ctx, const Ports& in) = 0;
+  /// For stages whose StageInfo says `frame_ordered`: whether this object, with its parameters,
+  /// really carries state from frame to frame (e.g. `fit` only with warm_start). Pipelines
+  /// without such a stage may split their frames over threads and MPI ranks.
+  virtual bool keeps_state() const { return true; }
 };
 
 using StageMaker = std::function<std::unique_ptr<Stage>(const Params&)>;
