@@ -1,4 +1,5 @@
-// The built-in stage plugin (libtbsp_stages.so): readers, PCL filters, template fitting, writers.
+// The built-in stage plugin (libtbsp_stages.so): readers, PCL filters, template fitting,
+// Laplacian deformation, writers.
 // Loaded from the plugin path like any third-party plugin (docs/plugins.md).
 #include "stage_util.h"
 
@@ -6,4 +7,5 @@ TBSP_STAGE_PLUGIN(registry) {
   tbsp::pipeline::builtin::register_io_stages(registry);
   tbsp::pipeline::builtin::register_pcl_stages(registry);
   tbsp::pipeline::builtin::register_fit_stages(registry);
+  tbsp::pipeline::builtin::register_deform_stages(registry);
 }

@@ -36,5 +36,6 @@ CloudN::Ptr finite_points(const pcl::PointCloud<PointT>& in) {
 void register_io_stages(Registry& r);
 void register_pcl_stages(Registry& r);
 void register_fit_stages(Registry& r);
+void register_deform_stages(Registry& r);
 
 }  // namespace tbsp::pipeline::builtin

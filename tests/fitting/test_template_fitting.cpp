@@ -157,7 +157,8 @@ TEST(TemplateFittingBadInput, ClearErrors) {
   no_target.template_vertex = 0;
   fit.setMarkers({no_target});
   expect_error("needs a cloud_index or a finite free position");
-  // a template with a second, marker-less component whose vertices find no data: singular
+  // a template with a second, marker-less component whose vertices find no data (100 units
+  // away): held in place instead of a singular system (fit_iterate.cpp, anchor_free_components)
   TriMesh two;
   two.V.resize(2 * templ.V.rows(), 3);
   two.V << templ.V, (templ.V.rowwise() + Eigen::RowVector3d(100, 0, 0));
@@ -165,7 +166,18 @@ TEST(TemplateFittingBadInput, ClearErrors) {
   two.F << templ.F, (templ.F.array() + int(templ.V.rows())).matrix();
   fit.setInputTemplate(two);
   fit.setMarkers({FitMarker{0, 0}, FitMarker{5, 10}, FitMarker{9, 20}});
-  expect_error("free to translate");
+  {
+    TriMesh out;
+    ASSERT_NO_THROW(fit.reconstruct(out));
+    const Eigen::Index n = templ.V.rows();
+    // the unseen component moves as a whole and keeps its shape up to the fit's global scale λ
+    const Eigen::MatrixX3d A = two.V.bottomRows(n).rowwise() - two.V.bottomRows(n).colwise().mean();
+    const Eigen::MatrixX3d B = out.V.bottomRows(n).rowwise() - out.V.bottomRows(n).colwise().mean();
+    const double lambda = (A.array() * B.array()).sum() / A.squaredNorm();
+    EXPECT_NEAR(lambda, fit.report().scale, 0.05);
+    EXPECT_LT((B - lambda * A).rowwise().norm().maxCoeff(), 0.02 * bbox_diagonal(templ.V));
+    EXPECT_TRUE(out.V.allFinite());
+  }
   FitParameters p;
   p.max_normal_angle_deg = -3;
   EXPECT_THROW(fit.setParameters(p), InvalidInput);

@@ -93,6 +93,11 @@ void initial_pose(FitState& s) {
     }
   }
   s.D.setUseRotationField(field);
+  // components without markers move by the markers' mean displacement
+  Eigen::Vector3d shift = Eigen::Vector3d::Zero();
+  for (std::size_t k = 0; k < s.mverts.size() && k < s.mtarget.size(); ++k)
+    shift += (s.mtarget[k] - s.templ().V.row(s.mverts[k]).transpose()) / double(s.mverts.size());
+  anchor_free_components(s, s.templ().V, s.templ().F, shift, false);
   try {
     s.V = s.D.deform();
   } catch (const InvalidInput& e) {

@@ -10,6 +10,7 @@
 #include "tbsp/deform/rotation_field.h"
 #include "tbsp/deform/rotations.h"
 #include "tbsp/mesh/cotan_laplacian.h"
+#include "tbsp/mesh/topology.h"
 
 namespace tbsp {
 namespace fit_impl {
@@ -94,6 +95,7 @@ void set_constraints(FitState& s, Iterations& st, bool freeze, double w_data, co
                                                                 w_data * std::sqrt(match_scale(j)));
   st.frozen_target = s.target;
   if (!freeze) st.frozen_ids.clear();
+  anchor_free_components(s, s.V, s.F, Eigen::Vector3d::Zero(), true);
   // Once frozen, the propagated constraints of §5.3 join the system right away (their targets
   // follow the matched displacements each iteration): the final system of the thesis — matched
   // + propagated constraints — is then the frozen one, factorized once, instead of a separate
@@ -102,6 +104,47 @@ void set_constraints(FitState& s, Iterations& st, bool freeze, double w_data, co
 }
 
 }  // namespace
+
+void anchor_free_components(FitState& s, const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& F, const Eigen::Vector3d& offset,
+                            bool use_matches) {
+  Eigen::VectorXi label;
+  const int n = connected_components(F, X.rows(), label);
+  const bool any_match = use_matches && std::count(s.matched.begin(), s.matched.end(), 1) > 0;
+  if (n <= 1 && (!s.mverts.empty() || any_match)) return;
+  std::vector<char> held(std::size_t(n), 0);
+  if (use_matches)
+    for (Eigen::Index j = 0; j < X.rows() && std::size_t(j) < s.matched.size(); ++j)
+      if (s.matched[std::size_t(j)]) held[std::size_t(label(j))] = 1;
+  for (int mv : s.mverts)
+    if (label(mv) >= 0) held[std::size_t(label(mv))] = 1;
+  std::vector<Eigen::Vector3d> centre(std::size_t(n), Eigen::Vector3d::Zero());
+  std::vector<int> count(std::size_t(n), 0);
+  for (Eigen::Index j = 0; j < X.rows(); ++j)
+    if (!held[std::size_t(label(j))]) {
+      centre[std::size_t(label(j))] += X.row(j).transpose();
+      ++count[std::size_t(label(j))];
+    }
+  std::vector<Eigen::Index> pick(std::size_t(n), -1);
+  std::vector<double> best(std::size_t(n), std::numeric_limits<double>::infinity());
+  for (Eigen::Index j = 0; j < X.rows(); ++j) {
+    const int c = label(j);
+    if (held[std::size_t(c)]) continue;
+    const double d = (X.row(j).transpose() - centre[std::size_t(c)] / count[std::size_t(c)]).squaredNorm();
+    if (d < best[std::size_t(c)]) {  // first vertex wins ties: deterministic
+      best[std::size_t(c)] = d;
+      pick[std::size_t(c)] = j;
+    }
+  }
+  int anchored = 0;
+  for (int c = 0; c < n; ++c)
+    if (pick[std::size_t(c)] >= 0) {
+      s.D.addPositionConstraint(SurfacePoint::atVertex(int(pick[std::size_t(c)])), X.row(pick[std::size_t(c)]).transpose() + offset,
+                                s.u.propagation_weight);
+      ++anchored;
+    }
+  if (anchored > 0)
+    logger()->debug("[TemplateFitting] {} mesh component(s) without data or markers held in place", anchored);
+}
 
 bool iterate_fit(FitState& s) {
   FitReport& rep = s.rep;

@@ -126,6 +126,14 @@ double percentile99_move(const Eigen::MatrixX3d& A, const Eigen::MatrixX3d& B, c
 // ---- fit_iterate.cpp
 /// Stage 2: the iterative fit. Returns whether it converged.
 bool iterate_fit(FitState& s);
+/// A mesh component without a marker or a matched vertex (a part the scan does not see, e.g. a
+/// hand behind the body in one frame of a replay) would be free to translate: the system is
+/// singular. It keeps its place instead: one weak constraint (propagation_weight) at its vertex
+/// nearest its centroid holds it at X + offset; its shape still follows δ and the rotation field.
+/// Adds the constraints to s.D (positions X, faces F); matched vertices hold their component
+/// when `use_matches` (s.matched may be empty), markers always.
+void anchor_free_components(FitState& s, const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& F, const Eigen::Vector3d& offset,
+                            bool use_matches);
 
 // ---- fit_surface_steps.cpp
 /// Adaptive 1-to-4 subdivision of faces whose data error exceeds ε (§5.5.2). Returns whether
