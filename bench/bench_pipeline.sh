@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Pipeline scaling benchmark (docs/scaling.md): a synthetic range-scan replay (tbsp synth-studio
 # --range-scans) through merge + voxel filter + per-frame template fit (no warm start, so frames
-# are independent) on 1 process, 2 frame threads and mpirun -np 2. Prints frames/s, speed-up and
+# are independent; tests/pipeline/replay_fit.yaml.in) on 1 process, 2 frame threads and mpirun -np 2. Prints frames/s, speed-up and
 # efficiency, the per-frame compute and gather times, and the modelled time for 8 and 64 ranks.
 #   bench/bench_pipeline.sh [build/plugins/tbsp] [FRAMES=100] [REPEATS=3]
 set -euo pipefail
 tbsp=$(realpath "${1:-build/plugins/tbsp}")
+template=$(realpath "$(dirname "$0")/../tests/pipeline/replay_fit.yaml.in")
 frames=${2:-100}
 repeats=${3:-3}
 mpiexec=$(command -v mpiexec || command -v mpirun || true)
@@ -14,17 +15,7 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 cd "$work"
 "$tbsp" synth-studio --out studio --frames "$frames" --cameras 2 --width 192 --height 192 --range-scans -q
-cat > p.yaml <<'YAML'
-report: out/report.json
-stages:
-  - {id: template, stage: read-mesh, params: {path: studio/template.ply}}
-  - {id: cam0, stage: read-cloud, params: {path: studio/scans/cam0/%04d.pcd}}
-  - {id: cam1, stage: read-cloud, params: {path: studio/scans/cam1/%04d.pcd}}
-  - {id: scans, stage: merge-clouds, inputs: {a: cam0, b: cam1}}
-  - {id: thinned, stage: pcl.voxel-grid, input: scans, params: {leaf: 0.02}}
-  - {id: fit, stage: fit, inputs: {cloud: thinned, template: template}, params: {warm_start: false, iterations: 8}}
-  - {id: mesh, stage: write-mesh, input: fit, params: {path: out/fit_%04d.ply}}
-YAML
+sed "s#@OUT@#out#g; s#@WARM@#false#g" "$template" > p.yaml
 field() { sed -n "s/^  \"$1\": \([0-9.e+-]*\),\{0,1\}$/\1/p" out/report.json; }  # a top-level number of the report
 median() { sort -g | awk '{a[NR]=$1} END {print (NR%2 ? a[(NR+1)/2] : (a[NR/2]+a[NR/2+1])/2)}'; }
 run() {  # $1 = label, rest = command; prints the median wall time of $repeats runs

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <optional>
 #include <sstream>
 
 #include "stage_util.h"
@@ -36,13 +37,35 @@ std::vector<int> pattern_frames(const std::string& pattern, long long first, lon
   return f;
 }
 
-class ReadCloud : public Stage {
+// A file per frame (a %d pattern: a frame source) or one file for every frame (read once).
+class FileSource : public Stage {
 public:
-  explicit ReadCloud(const Params& p) : path_(p.text("path")), first_(p.integer("first")), last_(p.integer("last")) {}
+  FileSource(const Params& p, std::string port)
+      : path_(p.text("path")), first_(p.integer("first")), last_(p.integer("last")), port_(std::move(port)) {}
   std::vector<int> frames() override { return is_pattern(path_) ? pattern_frames(path_, first_, last_) : std::vector<int>{}; }
   Ports process(FrameContext& ctx, const Ports&) override {
-    if (!is_pattern(path_) && cached_.cloud) return {{"cloud", cached_}};
-    const std::string file = is_pattern(path_) ? expand_frame_pattern(path_, ctx.frame) : path_;
+    if (cached_) return {{port_, *cached_}};
+    const Data d = read(is_pattern(path_) ? expand_frame_pattern(path_, ctx.frame) : path_);
+    if (!is_pattern(path_)) cached_ = d;
+    return {{port_, d}};
+  }
+
+protected:
+  virtual Data read(const std::string& file) const = 0;
+
+private:
+  std::string path_;
+  long long first_, last_;
+  std::string port_;
+  std::optional<Data> cached_;
+};
+
+class ReadCloud : public FileSource {
+public:
+  explicit ReadCloud(const Params& p) : FileSource(p, "cloud") {}
+
+protected:
+  Data read(const std::string& file) const override {
     bool normals = false;
     auto c = read_cloud_normals(file, &normals);
     CloudN::Ptr kept = finite_points(*c);
@@ -50,37 +73,23 @@ public:
       for (std::size_t i = 0, j = 0; i < c->size(); ++i) {
         const auto& q = (*c)[i];
         if (std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z)) {
-          (*kept)[j].normal_x = q.normal_x; (*kept)[j].normal_y = q.normal_y; (*kept)[j].normal_z = q.normal_z;
+          (*kept)[j].normal_x = q.normal_x;
+          (*kept)[j].normal_y = q.normal_y;
+          (*kept)[j].normal_z = q.normal_z;
           ++j;
         }
       }
     if (kept->empty()) throw InvalidInput("'" + file + "': the cloud has no finite point");
-    Data d = Data::of(kept, normals);
-    if (!is_pattern(path_)) cached_ = d;
-    return {{"cloud", d}};
+    return Data::of(kept, normals);
   }
-
-private:
-  std::string path_;
-  long long first_, last_;
-  Data cached_;
 };
 
-class ReadMesh : public Stage {
+class ReadMesh : public FileSource {
 public:
-  explicit ReadMesh(const Params& p) : path_(p.text("path")), first_(p.integer("first")), last_(p.integer("last")) {}
-  std::vector<int> frames() override { return is_pattern(path_) ? pattern_frames(path_, first_, last_) : std::vector<int>{}; }
-  Ports process(FrameContext& ctx, const Ports&) override {
-    if (!is_pattern(path_) && cached_) return {{"mesh", Data::of(cached_)}};
-    auto m = std::make_shared<const TriMesh>(read_mesh(is_pattern(path_) ? expand_frame_pattern(path_, ctx.frame) : path_));
-    if (!is_pattern(path_)) cached_ = m;
-    return {{"mesh", Data::of(m)}};
-  }
+  explicit ReadMesh(const Params& p) : FileSource(p, "mesh") {}
 
-private:
-  std::string path_;
-  long long first_, last_;
-  std::shared_ptr<const TriMesh> cached_;
+protected:
+  Data read(const std::string& file) const override { return Data::of(std::make_shared<const TriMesh>(read_mesh(file))); }
 };
 
 // .oni recordings (OpenNI2) or folders of 16-bit depth images.

@@ -5,6 +5,7 @@
 #   check_mpi.sh TBSP MPIEXEC
 set -euo pipefail
 tbsp=$1; mpiexec=$2
+template=$(realpath "$(dirname "$0")/replay_fit.yaml.in")
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1  # CI runs as root
 export OMPI_MCA_rmaps_base_oversubscribe=1
 work=$(mktemp -d)
@@ -12,21 +13,7 @@ trap 'rm -rf "$work"' EXIT
 cd "$work"
 "$tbsp" synth-studio --out studio --frames 6 --cameras 2 --width 160 --height 160 --range-scans -q
 write_pipeline() {  # $1 = output folder, $2 = warm_start
-  cat > "p_$1.yaml" <<YAML
-report: $1/report.json
-stages:
-  - {id: template, stage: read-mesh, params: {path: studio/template.ply}}
-  - {id: cam0, stage: read-cloud, params: {path: studio/scans/cam0/%04d.pcd}}
-  - {id: cam1, stage: read-cloud, params: {path: studio/scans/cam1/%04d.pcd}}
-  - {id: scans, stage: merge-clouds, inputs: {a: cam0, b: cam1}}
-  - {id: thinned, stage: pcl.voxel-grid, input: scans, params: {leaf: 0.02}}
-  - id: fit
-    stage: fit
-    inputs: {cloud: thinned, template: template}
-    params: {warm_start: $2, iterations: 8}
-  - {id: mesh, stage: write-mesh, input: fit, params: {path: $1/fit_%04d.ply}}
-  - {id: cloud, stage: write-cloud, input: thinned, params: {path: $1/cloud_%04d.pcd}}
-YAML
+  sed "s#@OUT@#$1#g; s#@WARM@#$2#g" "$template" > "p_$1.yaml"
 }
 write_pipeline one false
 write_pipeline two false
@@ -52,7 +39,7 @@ rc=$?
 set -e
 cat err.txt
 [ "$rc" -eq 2 ] || { echo "expected exit 2 from the failing run, got $rc"; exit 1; }
-grep -q "error (rank 1 of 2): frame 3, node 'cam1' (read-cloud, p_two.yaml:5)" err.txt
+grep -q "error (rank 1 of 2): frame 3, node 'cam1' (read-cloud, p_two.yaml:7)" err.txt
 cmp before.ply two/fit_0000.ply  # the earlier output is untouched
 if ls -a two | grep -q "tbsp-run"; then echo "temporary files left behind"; exit 1; fi
 echo "a failing frame on rank 1: exit $rc, message names rank, frame, node and line, earlier outputs kept"
