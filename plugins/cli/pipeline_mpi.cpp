@@ -90,12 +90,6 @@ std::vector<pipeline::FrameReport> frames_from_json(const std::string& text) {
 
 }  // namespace
 
-bool launched_by_mpirun() {
-  for (const char* v : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK"})
-    if (std::getenv(v)) return true;
-  return false;
-}
-
 int run_distributed(const pipeline::Pipeline& p, const pipeline::Registry& reg, pipeline::RunOptions o, bool quiet) {
   int provided = 0;
   MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
@@ -229,7 +223,7 @@ int run_distributed(const pipeline::Pipeline& p, const pipeline::Registry& reg, 
     } catch (const std::exception& e) {
       pipeline::discard_staged(all);
       std::cerr << "tbsp run: error (rank 0, gathering the outputs): " << e.what() << "\n";
-      result = 1;
+      MPI_Abort(MPI_COMM_WORLD, 1);  // other ranks may still be sending: do not leave them hanging
     }
   }
   if (!private_dir.empty()) {
