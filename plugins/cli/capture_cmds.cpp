@@ -49,6 +49,8 @@ void add_synth_studio(CLI::App& app, SynthStudioArgs& a, CLI::App*& sub) {
   sub->add_option("--image-noise", a.o.image_noise, "Gaussian image noise in grey levels (default 0)");
   sub->add_option("--markers", a.o.markers, "marker vertices written to markers.trc (default 12)");
   sub->add_flag("--range-scans", a.o.range_scans, "also write a virtual range scan per camera and frame (scans/camK/FFFF.pcd)");
+  sub->add_flag("--depth-images", a.o.depth_images,
+                "also write the range scans as 16-bit depth images (depth/camK/FFFF.png, 0.2 mm units; intrinsics = camera's / --scan-stride)");
   sub->add_option("--scan-noise", a.o.scan_noise, "range-scan noise along the rays, metres (default 0.002)");
   sub->add_option("--scan-stride", a.o.scan_stride, "range-scan pixel stride (default 2)");
   sub->add_option("--detail", a.o.detail, "performer mesh resolution 0..3 (default 1)");

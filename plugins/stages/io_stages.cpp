@@ -1,6 +1,8 @@
 // Built-in sources and sinks: read-cloud, read-mesh, read-depth, write-cloud, write-mesh,
 // render-png. They wrap capture_io's readers and writers (no file-format code here).
 #include <pcl/conversions.h>
+#include <pcl/features/normal_3d.h>
+#include <pcl/search/kdtree.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -95,7 +97,7 @@ protected:
 // .oni recordings (OpenNI2) or folders of 16-bit depth images.
 class ReadDepth : public Stage {
 public:
-  explicit ReadDepth(const Params& p) : path_(p.text("path")), scale_(p.real("depth_scale")) {
+  explicit ReadDepth(const Params& p) : path_(p.text("path")), scale_(p.real("depth_scale")), normals_k_(int(p.integer("normals"))) {
     if (fs::path(path_).extension() == ".oni") return;
     if (!fs::is_directory(path_)) throw FileError("'" + path_ + "': neither an .oni recording nor a folder of depth images");
     for (const auto& e : fs::directory_iterator(path_)) {
@@ -104,12 +106,29 @@ public:
     }
     std::sort(files_.begin(), files_.end());
     if (files_.empty()) throw FileError("'" + path_ + "': no depth images (.png .pgm .tif .tiff) in this folder");
+    if (!p.text("studio").empty()) {  // intrinsics and pose of a studio camera
+      const Studio st = read_studio(p.text("studio"));
+      const std::string name = p.text("camera");
+      std::string names;
+      for (const auto& c : st.cameras) {
+        names += (names.empty() ? "" : ", ") + c.camera.name();
+        if (c.camera.name() == name) pose_ = c.camera;
+      }
+      if (!pose_) throw InvalidInput("'" + p.text("studio") + "' has no camera '" + name + "' (its cameras: " + names + ")");
+      const double s = double(p.integer("stride"));
+      K_.fx = pose_->K()(0, 0) / s;
+      K_.fy = pose_->K()(1, 1) / s;
+      K_.cx = pose_->K()(0, 2) / s;
+      K_.cy = pose_->K()(1, 2) / s;
+      return;
+    }
     const std::string in = p.text("intrinsics");
     char c1 = 0, c2 = 0, c3 = 0;
     std::istringstream is(in);
     if (in.empty() || !(is >> K_.fx >> c1 >> K_.fy >> c2 >> K_.cx >> c3 >> K_.cy) || c1 != ',' || c2 != ',' || c3 != ',' || K_.fx <= 0 ||
         K_.fy <= 0)
-      throw InvalidInput("a folder of depth images needs 'intrinsics: fx,fy,cx,cy' in pixels (e.g. 525,525,319.5,239.5); got '" + in + "'");
+      throw InvalidInput("a folder of depth images needs 'intrinsics: fx,fy,cx,cy' in pixels (e.g. 525,525,319.5,239.5), or "
+                         "'studio' + 'camera'; got '" + in + "'");
   }
   std::vector<int> frames() override {
     std::vector<int> f;
@@ -126,6 +145,7 @@ public:
   }
   Ports process(FrameContext& ctx, const Ports&) override {
     CloudN::Ptr c;
+    bool has_normals = false;
     if (oni_) {
       OniFrame fr;
       bool got = false;
@@ -136,9 +156,29 @@ public:
     } else {
       const std::string& f = files_.at(std::size_t(ctx.frame));
       c = finite_points(depth_to_cloud(read_depth_image(f), K_, scale_));
+      if (normals_k_ > 0 && c->size() > std::size_t(normals_k_)) {
+        // PCA normals (pcl::NormalEstimation) turned towards the sensor at the origin
+        pcl::NormalEstimation<pcl::PointNormal, pcl::PointNormal> ne;
+        ne.setInputCloud(c);
+        ne.setSearchMethod(pcl::search::KdTree<pcl::PointNormal>::Ptr(new pcl::search::KdTree<pcl::PointNormal>));
+        ne.setKSearch(normals_k_);
+        ne.setViewPoint(0, 0, 0);
+        CloudN::Ptr n(new CloudN(*c));
+        ne.compute(*n);
+        c = finite_normals(*n);
+        has_normals = true;
+      }
+      if (pose_) {  // camera -> world: X = Rᵀ (Xc - t), normals rotated
+        const Eigen::Matrix3f Rt = pose_->R().transpose().cast<float>();
+        const Eigen::Vector3f t = pose_->t().cast<float>();
+        for (auto& q : *c) {
+          q.getVector3fMap() = Rt * (q.getVector3fMap() - t);
+          q.getNormalVector3fMap() = Rt * q.getNormalVector3fMap();
+        }
+      }
     }
     if (c->empty()) throw InvalidInput("'" + path_ + "' frame " + std::to_string(ctx.frame) + ": no valid depth pixel");
-    return {{"cloud", Data::of(c, false)}};
+    return {{"cloud", Data::of(c, has_normals)}};
   }
   // an .oni recording is read forwards by one reader; image folders allow any frame order
   bool keeps_state() const override { return files_.empty(); }
@@ -149,6 +189,8 @@ private:
   DepthIntrinsics K_;
   std::vector<std::string> files_;
   std::unique_ptr<OniReader> oni_;
+  std::optional<Camera> pose_;  // with 'studio': clouds in world coordinates
+  int normals_k_ = 0;
 };
 
 std::string out_path(const std::string& pattern, int frame) { return is_pattern(pattern) ? expand_frame_pattern(pattern, frame) : pattern; }
@@ -235,8 +277,12 @@ void register_io_stages(Registry& r) {
     StageInfo s{"read-depth", "depth-sensor replay: an OpenNI .oni recording or a folder of 16-bit depth images, one cloud per frame"};
     s.params = {ParamSpec::input_path("path", ".oni file or folder of depth images (.png .pgm .tif .tiff, sorted by name)", true),
                 ParamSpec::text("intrinsics", "", "folders: fx,fy,cx,cy in pixels (.oni: from the recording)"),
-                ParamSpec::real("depth_scale", "0.001", "folders: metres per raw depth unit (TUM: 0.0002)", 1e-9, 1e3)};
-    s.outputs = {{"cloud", DataType::Cloud, "the valid depth pixels back-projected, metres, camera frame"}};
+                ParamSpec::real("depth_scale", "0.001", "folders: metres per raw depth unit (TUM and tbsp synth-studio: 0.0002)", 1e-9, 1e3),
+                ParamSpec::input_path("studio", "folders: a studio.yaml whose camera gives intrinsics and pose (clouds in world coordinates)", false),
+                ParamSpec::text("camera", "", "with 'studio': the camera's name"),
+                ParamSpec::integer("stride", "1", "with 'studio': the camera's pixels per depth pixel (synth-studio --scan-stride)", 1, 64),
+                ParamSpec::integer("normals", "0", "folders: estimate normals from this many neighbours, turned to the sensor (0: none)", 0, 1000)};
+    s.outputs = {{"cloud", DataType::Cloud, "the valid depth pixels back-projected, metres; camera frame, or world frame with 'studio'"}};
     s.frame_ordered = true;  // .oni recordings: read forwards by one reader (see keeps_state)
     r.add(s, [](const Params& p) { return std::make_unique<ReadDepth>(p); });
   }

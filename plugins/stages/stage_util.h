@@ -33,6 +33,18 @@ CloudN::Ptr finite_points(const pcl::PointCloud<PointT>& in) {
   return out;
 }
 
+/// The points of `in` with finite coordinates and finite normals.
+inline CloudN::Ptr finite_normals(const CloudN& in) {
+  CloudN::Ptr out(new CloudN);
+  out->reserve(in.size());
+  for (const auto& q : in)
+    if (std::isfinite(q.x) && std::isfinite(q.normal_x) && std::isfinite(q.normal_y) && std::isfinite(q.normal_z)) out->push_back(q);
+  out->width = std::uint32_t(out->size());
+  out->height = 1;
+  out->is_dense = true;
+  return out;
+}
+
 void register_io_stages(Registry& r);
 void register_pcl_stages(Registry& r);
 void register_fit_stages(Registry& r);

@@ -1,5 +1,6 @@
 #include "tbsp/plugins/synth_studio.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <functional>
@@ -188,6 +189,7 @@ void setup_studio(const std::string& dir, const StudioOptions& o, const std::str
     fs::create_directories(fs::path(dir) / "images" / sc.camera.name());
     fs::create_directories(fs::path(dir) / "silhouettes" / sc.camera.name());
     if (o.range_scans) fs::create_directories(fs::path(dir) / "scans" / sc.camera.name());
+    if (o.depth_images) fs::create_directories(fs::path(dir) / "depth" / sc.camera.name());
   }
   fs::create_directories(fs::path(dir) / "gt");
 }
@@ -240,14 +242,27 @@ void render_frame(const std::string& dir, const Studio& s, const TriMesh& rest, 
       };
       save(s.imagePath(c, f), img);
       save(s.silhouettePath(c, f), mask_image(b));
-      if (o.range_scans) {
+      if (o.range_scans || o.depth_images) {
         RangeScanOptions ro;
         ro.noise_sigma = o.scan_noise;
         ro.stride = o.scan_stride;
         ro.seed = o.seed + static_cast<std::uint64_t>(f) * 64 + static_cast<std::uint64_t>(c);
         const auto cloud = range_scan(m, cam, ro);
-        const std::string p = (fs::path(dir) / "scans" / cam.name() / (expand_frame_pattern("%04d", f) + ".pcd")).string();
-        atomic_write_with(p, [&](const std::string& tmp) { return pcl::io::savePCDFileBinary(tmp, cloud) == 0; });
+        if (o.range_scans) {
+          const std::string p = (fs::path(dir) / "scans" / cam.name() / (expand_frame_pattern("%04d", f) + ".pcd")).string();
+          atomic_write_with(p, [&](const std::string& tmp) { return pcl::io::savePCDFileBinary(tmp, cloud) == 0; });
+        }
+        if (o.depth_images) {  // the same samples as depth along the optical axis, 0.2 mm units
+          cv::Mat d(int(cloud.height), int(cloud.width), CV_16UC1, cv::Scalar(0));
+          for (int v = 0; v < d.rows; ++v)
+            for (int u = 0; u < d.cols; ++u) {
+              const auto& q = cloud.at(u, v);
+              if (!std::isfinite(q.z)) continue;
+              const double z = (cam.R() * Eigen::Vector3d(q.x, q.y, q.z) + cam.t()).z();
+              d.at<std::uint16_t>(v, u) = static_cast<std::uint16_t>(std::clamp(std::lround(z / 0.0002), 1L, 65535L));
+            }
+          save((fs::path(dir) / "depth" / cam.name() / (expand_frame_pattern("%04d", f) + ".png")).string(), d);
+        }
       }
     } catch (const std::exception& e) {
       errors[static_cast<std::size_t>(c)] = e.what();

@@ -41,6 +41,10 @@ struct StudioOptions {
   double image_noise = 0.0;   ///< Gaussian image noise, grey levels (0..255)
   int markers = 12;           ///< marker vertices (farthest-point sampled) written to markers.trc
   bool range_scans = false;   ///< also write scans/camK/FFFF.pcd from each camera
+  /// also write the range scans as 16-bit depth images depth/camK/FFFF.png (depth along the
+  /// optical axis in units of 0.2 mm, 0 = no data; image size and intrinsics of the scan: the
+  /// camera's divided by scan_stride) — a depth-sensor recording with a known pose
+  bool depth_images = false;
   double scan_noise = 0.002;  ///< range-scan noise along the rays (metres)
   int scan_stride = 2;
   int detail = 1;             ///< mesh resolution of the performer (0 coarse .. 3 fine)
@@ -68,7 +72,7 @@ StudioResult write_synthetic_studio(const std::string& dir, const StudioOptions&
 /// radius 2 × the sequence's height around its bounding box, alternating heights, looking at its
 /// centre. Writes studio.yaml, template.ply (= `rest`), images/, silhouettes/, gt/FFFF.ply [,
 /// scans/]; no markers. Uses cameras, width, height, frames, frame_rate, image_noise,
-/// range_scans, scan_noise, scan_stride, seed of `options`. Throws InvalidInput on bad options
+/// range_scans, depth_images, scan_noise, scan_stride, seed of `options`. Throws InvalidInput on bad options
 /// or a frame whose vertex or face count differs from `rest`'s.
 StudioResult write_sequence_studio(const std::string& dir, const TriMesh& rest, const std::function<TriMesh(int)>& frame,
                                    const StudioOptions& options, const ProgressCallback& progress = {});
