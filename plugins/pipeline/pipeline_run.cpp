@@ -173,10 +173,6 @@ FrameReport run_frame(const Pipeline& p, const Registry& reg, std::vector<std::u
 
 }  // namespace
 
-std::vector<std::string> stateful_nodes(const Pipeline& p, const Registry& reg) {
-  return stateful(p, reg, make_stages(p, reg));
-}
-
 RunReport run_pipeline(const Pipeline& p, const Registry& reg, const RunOptions& opt) {
   const auto t0 = Clock::now();
   if (opt.ranks < 1 || opt.rank < 0 || opt.rank >= opt.ranks) throw InvalidInput("run_pipeline: rank must be in [0, ranks)");
@@ -229,7 +225,6 @@ RunReport run_pipeline(const Pipeline& p, const Registry& reg, const RunOptions&
 
   StagedOutputs staged(opt.stage_dir);
   RunReport report;
-  report.total_frames = int(frames.size());
   report.threads = threads;
   std::mutex m;
   std::size_t done = 0;

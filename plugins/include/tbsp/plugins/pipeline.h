@@ -88,7 +88,6 @@ struct StagedFile {
 };
 struct RunReport {
   std::vector<FrameReport> frames;   ///< the frames run by this process, by frame number
-  int total_frames = 0;              ///< frames of the whole run (all ranks)
   std::vector<std::string> outputs;  ///< files written (after the rename)
   std::vector<StagedFile> staged;    ///< with RunOptions::commit = false: not yet renamed
   int threads = 1;                   ///< worker threads used
@@ -103,10 +102,6 @@ struct RunReport {
 /// \throws InvalidInput when `ranks` or `threads` > 1 and a stage keeps state from frame to
 /// frame (naming the node; such pipelines run in order in one worker).
 RunReport run_pipeline(const Pipeline& pipeline, const Registry& registry, const RunOptions& options = {});
-
-/// The node ids of stages that keep state from frame to frame (StageInfo::frame_ordered and the
-/// stage object agrees, e.g. `fit` with warm_start), for the given parameters.
-std::vector<std::string> stateful_nodes(const Pipeline& pipeline, const Registry& registry);
 
 /// The run report as JSON text (frames sorted by number): what `report:` receives.
 std::string run_report_json(const Pipeline& pipeline, const RunReport& report);
