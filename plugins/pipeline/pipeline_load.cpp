@@ -286,12 +286,7 @@ Pipeline parse_pipeline(const std::string& text, const std::string& base_dir, co
       const StageInfo& src = *reg.find(raw[it->second].node.stage);
       if (src.outputs.empty()) throw PipelineError(file, line, "stage '" + ref.first + "' (" + src.name + ") has no output to connect");
       const PortSpec* out = nullptr;
-      if (ref.second.empty()) {
-        if (src.outputs.size() > 1) {
-          std::vector<std::string> names;
-          for (const auto& o : src.outputs) names.push_back(ref.first + "." + o.name);
-          throw PipelineError(file, line, "'" + ref.first + "' has several outputs: write one of " + join(names));
-        }
+      if (ref.second.empty()) {  // NODE alone: its first (main) output
         out = &src.outputs.front();
         ref.second = out->name;
       } else {

@@ -34,8 +34,8 @@ public:
   std::string stage(const std::string& target, const std::string& who) {
     std::lock_guard<std::mutex> lock(m_);
     if (auto it = owner_.find(target); it != owner_.end())
-      throw InvalidInput(who + " writes '" + target + "' again (already written by " + it->second +
-                         "); give the path a frame pattern such as %04d so that every frame has its own file");
+      throw InvalidInput("'" + target + "' was already written by " + it->second +
+                         "; give the path a frame pattern such as %04d so that every frame has its own file");
     owner_[target] = who;
     const fs::path t(target);
     const fs::path folder = dir_.empty() ? t.parent_path() : fs::path(dir_);
@@ -130,15 +130,35 @@ std::vector<std::string> stateful(const Pipeline& p, const Registry& reg, const 
   return ids;
 }
 
-// Runs one frame through every node.
+// The nodes this frame has to run: every node whose outputs nobody reads (sinks and ends), and
+// every node that a needed node reads from through a port it needs now (Stage::needs_input).
+// Nodes are in dependency order, so one backward pass decides each node after its readers.
+std::vector<bool> needed_nodes(const Pipeline& p, const std::vector<std::unique_ptr<Stage>>& stages) {
+  std::map<std::string, std::size_t> index;
+  for (std::size_t i = 0; i < p.nodes.size(); ++i) index[p.nodes[i].id] = i;
+  std::vector<bool> read(p.nodes.size(), false), needed(p.nodes.size(), false);
+  for (const auto& n : p.nodes)
+    for (const auto& kv : n.inputs) read[index.at(kv.second.first)] = true;
+  for (std::size_t i = p.nodes.size(); i-- > 0;) {
+    if (!read[i]) needed[i] = true;
+    if (!needed[i]) continue;
+    for (const auto& [port, ref] : p.nodes[i].inputs)
+      if (stages[i]->needs_input(port)) needed[index.at(ref.first)] = true;
+  }
+  return needed;
+}
+
+// Runs one frame through every node it needs.
 FrameReport run_frame(const Pipeline& p, const Registry& reg, std::vector<std::unique_ptr<Stage>>& stages, int frame,
                       const ProgressCallback& progress, StagedOutputs& staged) {
   const auto tf = Clock::now();
   FrameReport fr;
   fr.frame = frame;
   std::map<std::string, Ports> values;  // node id -> its outputs for this frame
+  const std::vector<bool> needed = needed_nodes(p, stages);
   for (std::size_t i = 0; i < p.nodes.size(); ++i) {
     const Node& n = p.nodes[i];
+    if (!needed[i]) continue;
     const std::string prefix = "frame " + std::to_string(frame) + ", " + where(p, n) + ": ";
     FrameContext ctx;
     ctx.frame = frame;
@@ -148,7 +168,8 @@ FrameReport run_frame(const Pipeline& p, const Registry& reg, std::vector<std::u
     };
     ctx.stage_output = [&staged, prefix](const std::string& target) { return staged.stage(target, prefix.substr(0, prefix.size() - 2)); };
     Ports in;
-    for (const auto& [port, ref] : n.inputs) in[port] = values.at(ref.first).at(ref.second);
+    for (const auto& [port, ref] : n.inputs)
+      if (stages[i]->needs_input(port)) in[port] = values.at(ref.first).at(ref.second);
     const auto ts = Clock::now();
     try {
       report_progress(ctx.progress, 0.0, "start");

@@ -55,6 +55,8 @@ public:
   }
 
   bool keeps_state() const override { return warm_; }
+  // warm-started frames start from the last fit: the template is read by the first frame only
+  bool needs_input(const std::string& port) const override { return port != "template" || !(warm_ && last_); }
 
 private:
   bool warm_;

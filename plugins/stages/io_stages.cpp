@@ -1,5 +1,6 @@
 // Built-in sources and sinks: read-cloud, read-mesh, read-depth, write-cloud, write-mesh,
 // render-png. They wrap capture_io's readers and writers (no file-format code here).
+#include <pcl/common/io.h>
 #include <pcl/conversions.h>
 #include <pcl/features/normal_3d.h>
 #include <pcl/search/kdtree.h>
@@ -145,6 +146,7 @@ public:
   }
   Ports process(FrameContext& ctx, const Ports&) override {
     CloudN::Ptr c;
+    pcl::PointCloud<pcl::PointXYZ> xyz;  // organized: one point per pixel, NaN where no depth
     bool has_normals = false;
     if (oni_) {
       OniFrame fr;
@@ -152,10 +154,12 @@ public:
       while (oni_->next(fr))
         if (fr.index == ctx.frame) { got = true; break; }
       if (!got || fr.depth.empty()) throw FileError("'" + path_ + "': depth frame " + std::to_string(ctx.frame) + " could not be read");
-      c = finite_points(depth_to_cloud(fr.depth, oni_->info().depth_intrinsics, oni_->info().depth_scale));
+      xyz = depth_to_cloud(fr.depth, oni_->info().depth_intrinsics, oni_->info().depth_scale);
+      c = finite_points(xyz);
     } else {
       const std::string& f = files_.at(std::size_t(ctx.frame));
-      c = finite_points(depth_to_cloud(read_depth_image(f), K_, scale_));
+      xyz = depth_to_cloud(read_depth_image(f), K_, scale_);
+      c = finite_points(xyz);
       if (normals_k_ > 0 && c->size() > std::size_t(normals_k_)) {
         // PCA normals (pcl::NormalEstimation) turned towards the sensor at the origin
         pcl::NormalEstimation<pcl::PointNormal, pcl::PointNormal> ne;
@@ -168,17 +172,21 @@ public:
         c = finite_normals(*n);
         has_normals = true;
       }
-      if (pose_) {  // camera -> world: X = Rᵀ (Xc - t), normals rotated
-        const Eigen::Matrix3f Rt = pose_->R().transpose().cast<float>();
-        const Eigen::Vector3f t = pose_->t().cast<float>();
-        for (auto& q : *c) {
-          q.getVector3fMap() = Rt * (q.getVector3fMap() - t);
-          q.getNormalVector3fMap() = Rt * q.getNormalVector3fMap();
-        }
+    }
+    CloudN::Ptr grid(new CloudN);
+    pcl::copyPointCloud(xyz, *grid);  // keeps width x height and the NaN pixels; zero normals
+    if (pose_) {  // camera -> world: X = Rᵀ (Xc - t), normals rotated
+      const Eigen::Matrix3f Rt = pose_->R().transpose().cast<float>();
+      const Eigen::Vector3f t = pose_->t().cast<float>();
+      for (auto& q : *c) {
+        q.getVector3fMap() = Rt * (q.getVector3fMap() - t);
+        q.getNormalVector3fMap() = Rt * q.getNormalVector3fMap();
       }
+      for (auto& q : *grid) q.getVector3fMap() = Rt * (q.getVector3fMap() - t);  // NaN stays NaN
+      grid->sensor_origin_.head<3>() = -Rt * t;  // the camera centre: meshing's view point
     }
     if (c->empty()) throw InvalidInput("'" + path_ + "' frame " + std::to_string(ctx.frame) + ": no valid depth pixel");
-    return {{"cloud", Data::of(c, has_normals)}};
+    return {{"cloud", Data::of(c, has_normals)}, {"grid", Data::of(grid, false)}};
   }
   // an .oni recording is read forwards by one reader; image folders allow any frame order
   bool keeps_state() const override { return files_.empty(); }
@@ -282,7 +290,8 @@ void register_io_stages(Registry& r) {
                 ParamSpec::text("camera", "", "with 'studio': the camera's name"),
                 ParamSpec::integer("stride", "1", "with 'studio': the camera's pixels per depth pixel (synth-studio --scan-stride)", 1, 64),
                 ParamSpec::integer("normals", "0", "folders: estimate normals from this many neighbours, turned to the sensor (0: none)", 0, 1000)};
-    s.outputs = {{"cloud", DataType::Cloud, "the valid depth pixels back-projected, metres; camera frame, or world frame with 'studio'"}};
+    s.outputs = {{"cloud", DataType::Cloud, "the valid depth pixels back-projected, metres; camera frame, or world frame with 'studio'"},
+                 {"grid", DataType::Cloud, "the same points organized as the image (width x height, NaN where no depth): for pcl.organized-fast-mesh"}};
     s.frame_ordered = true;  // .oni recordings: read forwards by one reader (see keeps_state)
     r.add(s, [](const Params& p) { return std::make_unique<ReadDepth>(p); });
   }

@@ -79,11 +79,12 @@ public:
   }
   Ports process(FrameContext&, const Ports& in) override {
     const Data& d = in.at("cloud");
-    pcl::PassThrough<pcl::PointNormal> f;
+    pcl::PassThrough<pcl::PointNormal> f(true);  // removed indices kept: needed for keep-organized, and no warning
     f.setInputCloud(d.cloud);
     f.setFilterFieldName(field_);
     f.setFilterLimits(lo_, hi_);
     f.setNegative(negative_);
+    f.setKeepOrganized(d.cloud->height > 1);  // a depth grid stays a grid (removed pixels become NaN)
     CloudN::Ptr out(new CloudN);
     f.filter(*out);
     return cloud_out(out, d.has_normals, "pcl.pass-through");
@@ -132,7 +133,7 @@ void register_pcl_stages(Registry& r) {
     r.add(s, [](const Params& p) { return std::make_unique<OutlierRemoval>(p); });
   }
   {
-    StageInfo s{"pcl.pass-through", "pcl::PassThrough: keeps the points whose x, y or z lies in [min, max] (or outside, with negative)"};
+    StageInfo s{"pcl.pass-through", "pcl::PassThrough: keeps the points whose x, y or z lies in [min, max] (or outside, with negative); an organized cloud stays organized"};
     s.params = {ParamSpec::text("field", "z", "coordinate to test", {"x", "y", "z"}),
                 ParamSpec::real("min", "-1e30", "lower limit (inclusive)", -1e30, 1e30),
                 ParamSpec::real("max", "1e30", "upper limit (inclusive)", -1e30, 1e30),

@@ -49,5 +49,6 @@ void register_io_stages(Registry& r);
 void register_pcl_stages(Registry& r);
 void register_fit_stages(Registry& r);
 void register_deform_stages(Registry& r);
+void register_mesh_stages(Registry& r);
 
 }  // namespace tbsp::pipeline::builtin

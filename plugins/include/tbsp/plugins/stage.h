@@ -52,7 +52,7 @@ namespace tbsp::pipeline {
 
 /// Bumped whenever a type in this header changes layout; a plugin built against another version
 /// is refused when loaded (with a message naming the plugin and both versions).
-constexpr int kPluginAbiVersion = 1;
+constexpr int kPluginAbiVersion = 2;  // 2: Stage::needs_input
 
 /// What flows along an edge of the pipeline, one value per frame.
 enum class DataType {
@@ -240,6 +240,15 @@ public:
   /// really carries state from frame to frame (e.g. `fit` only with warm_start). Pipelines
   /// without such a stage may split their frames over threads and MPI ranks.
   virtual bool keeps_state() const { return true; }
+  /// Whether the next call of `process` reads the connected input `port` (asked before each
+  /// frame). When no stage needs a node's outputs in a frame, the runner skips that node for the
+  /// frame, e.g. `fit` with warm_start reads its template only on the first frame, so a template
+  /// built from the first frame's data is built once. A port answered `false` is absent from `in`.
+  /// Default: every connected input is read.
+  virtual bool needs_input(const std::string& port) const {
+    (void)port;
+    return true;
+  }
 };
 
 using StageMaker = std::function<std::unique_ptr<Stage>(const Params&)>;
