@@ -19,6 +19,7 @@
 #include "tbsp/mesh/tetrahedralize.h"
 #include "tbsp/plugins/json_file.h"
 #include "tbsp/plugins/tet_job_json.h"
+#include "tbsp/plugins/tet_job_run.h"
 
 namespace fs = std::filesystem;
 
@@ -28,11 +29,6 @@ namespace {
 
 bool is_tet_file(const std::string& p) { return lower_ext(p) == ".mesh"; }
 
-double mean_tet_edge(const TetMesh& t) {
-  double s = 0;
-  for (Eigen::Index j = 0; j < t.T.rows(); ++j) s += (t.V.row(t.T(j, 0)) - t.V.row(t.T(j, 1))).norm();
-  return s / double(std::max<Eigen::Index>(1, t.T.rows()));
-}
 }  // namespace
 
 void add_tetdeform(CLI::App& app, TetDeformArgs& a, CLI::App*& sub) {
@@ -57,42 +53,9 @@ int cmd_tetdeform(const TetDeformArgs& a) {
   const auto t_start = Clock::now();
   // 1. input and tet mesh
   const bool input_tets = is_tet_file(a.mesh);
-  TriMesh surface;
-  TetMesh tets;
-  bool decimated = false;
-  auto t0 = Clock::now();
-  if (input_tets) {
-    tets = read_tet_mesh(a.mesh);
-    surface = tet_boundary_surface(tets.V, tets.T);
-  } else {
-    surface = read_mesh(a.mesh);
-    TriMesh dec;
-    try {
-      tets = tetrahedralize_to_size(surface, a.tets, {}, &dec);
-    } catch (const InvalidInput& e) {
-      throw InvalidInput(a.mesh + ": cannot be tetrahedralized: " + e.what());
-    } catch (const Error& e) {
-      throw Error(a.mesh + ": cannot be tetrahedralized: " + e.what());
-    }
-    decimated = dec.F.rows() != surface.F.rows() || tets.V.rows() < surface.V.rows() ||
-                !(tets.V.topRows(surface.V.rows()) - surface.V).isZero(0);
-  }
-  const double t_tetra = seconds_since(t0);
-  // nearest input vertex of each tet vertex (vertex-list regions, vertex handles)
-  const Eigen::Index n_in = input_tets ? tets.V.rows() : surface.V.rows();
-  std::vector<Eigen::Index> to_input(std::size_t(tets.V.rows()));
-  std::vector<double> dist(std::size_t(tets.V.rows()), 0.0);
-  if (input_tets) {
-    for (std::size_t i = 0; i < to_input.size(); ++i) to_input[i] = Eigen::Index(i);
-  } else {
-    const PointSearch ps(surface.V);
-    for (Eigen::Index i = 0; i < tets.V.rows(); ++i) {
-      double d2;
-      to_input[std::size_t(i)] = ps.nearest(tets.V.row(i).transpose(), &d2);
-      dist[std::size_t(i)] = std::sqrt(d2);
-    }
-  }
-  const double snap = 1.5 * mean_tet_edge(tets);
+  const TetJobSetup setup = input_tets ? tet_job_setup(read_tet_mesh(a.mesh)) : tet_job_setup(read_mesh(a.mesh), a.tets, a.mesh);
+  const TetMesh& tets = setup.tets;
+  const Eigen::Index n_in = setup.numInputVertices();
 
   // 2. job files
   TetJob job;
@@ -108,39 +71,11 @@ int cmd_tetdeform(const TetDeformArgs& a) {
   if (a.no_interpolation) o.rotation_interpolation = false;
   if (job.max_step_degrees) o.max_handle_step_deg = *job.max_step_degrees;
   d.setOptions(o);
-  if (!job.stiffness.empty() || job.default_stiffness != 1.0) {
-    Eigen::VectorXd s = Eigen::VectorXd::Constant(tets.T.rows(), job.default_stiffness);
-    for (const auto& [r, v] : job.stiffness)
-      for (int t : resolve_region_tets(r, tets, to_input, dist, snap)) s(t) = v;
-    d.setStiffness(s);
-  }
-  for (std::size_t i = 0; i < job.rigid.size(); ++i) {
-    const auto ts = resolve_region_tets(job.rigid[i], tets, to_input, dist, snap);
-    if (ts.empty()) throw InvalidInput(a.rigid + ": rigid[" + std::to_string(i) + "] contains no tetrahedron; enlarge it");
-    d.addRigidRegion(ts);
-  }
-  for (const auto& h : job.handles) {
-    try {
-      if (h.kind == TetHandleSpec::Region) {
-        const auto vs = resolve_region_vertices(h.region, tets.V, to_input, dist, snap);
-        if (vs.empty())
-          throw InvalidInput("the region selects no vertex of the tet mesh (" + std::to_string(tets.V.rows()) +
-                             " vertices); enlarge it or use more tets");
-        d.addRegionHandle(vs, h.motion);
-      } else if (h.kind == TetHandleSpec::Vertex) {
-        if (input_tets || !decimated) d.addVertexHandle(h.vertex, h.target);
-        else d.addPointHandle(surface.V.row(h.vertex).transpose(), h.target);
-      } else {
-        d.addPointHandle(h.point, h.target);
-      }
-    } catch (const InvalidInput& e) {
-      throw InvalidInput(a.handles + ": " + h.where + ": " + e.what());
-    }
-  }
+  apply_tet_job(setup, job, {a.handles, a.rigid}, d);
   ProgressBar bar(!a.quiet);
   d.setProgressCallback(bar.callback());
   const int iterations = a.iterations > 0 ? a.iterations : job.iterations.value_or(50);
-  t0 = Clock::now();
+  auto t0 = Clock::now();
   try {
     d.deform(iterations);
   } catch (const InvalidInput& e) {
@@ -158,21 +93,7 @@ int cmd_tetdeform(const TetDeformArgs& a) {
     outm.V = d.positions();
     write_tet_mesh(a.out, outm);
   } else {
-    TriMesh out = surface;
-    if (input_tets) {
-      out = tet_boundary_surface(d.positions().topRows(tets.V.rows()), tets.T);
-    } else if (!decimated) {
-      out.V = d.positions().topRows(surface.V.rows());
-    } else {
-      DeformationTransfer dt;
-      dt.precompute(tets, surface.V);
-      t_pre = dt.precomputeSeconds();
-      t0 = Clock::now();
-      out.V = dt.apply(d.inputPositions());
-      t_apply = seconds_since(t0);
-    }
-    out.N.resize(0, 3);
-    write_mesh(a.out, out);
+    write_mesh(a.out, deformed_surface(setup, d, &t_pre, &t_apply));
   }
   if (!a.save_tets.empty()) {
     TetMesh outm = d.mesh();
@@ -184,7 +105,7 @@ int cmd_tetdeform(const TetDeformArgs& a) {
   const int it = std::max(1, r.iterations);
   rep["input"] = {{"mesh", a.mesh}, {"handles", a.handles}, {"vertices", n_in}};
   rep["output"] = a.out;
-  rep["tet_mesh"] = {{"vertices", r.vertices}, {"tets", r.tets}, {"decimated", decimated}, {"added_vertices", r.added_vertices},
+  rep["tet_mesh"] = {{"vertices", r.vertices}, {"tets", r.tets}, {"decimated", setup.decimated}, {"added_vertices", r.added_vertices},
                      {"split_tets", r.split_tets}, {"virtual_tets", r.virtual_tets}};
   rep["handles"] = {{"vertex", r.vertex_handles}, {"region", r.region_handles}, {"point", r.point_handles},
                     {"constrained_vertices", r.constrained_vertices}, {"rigid_regions", r.rigid_regions},
@@ -199,7 +120,7 @@ int cmd_tetdeform(const TetDeformArgs& a) {
   rep["max_handle_residual"] = r.max_handle_residual;
   rep["solver"] = r.backend;
   const double per_it = (r.t_def + r.t_rotext + r.t_rotint + r.t_rigid + r.t_difupd) / it;
-  rep["timings_s"] = {{"tetrahedralize", t_tetra}, {"setup", r.t_setup}, {"factorize", r.t_factorize},
+  rep["timings_s"] = {{"tetrahedralize", setup.tetrahedralize_seconds}, {"setup", r.t_setup}, {"factorize", r.t_factorize},
                       {"factorize_rotint", r.t_factorize_rotint}, {"deform_total", t_deform},
                       {"per_iteration", {{"def", r.t_def / it}, {"rotext", r.t_rotext / it}, {"rotint", r.t_rotint / it},
                                          {"rigid", r.t_rigid / it}, {"difupd", r.t_difupd / it}, {"total", per_it}}},

@@ -1,10 +1,13 @@
-// Built-in stage "deform": tbsp::LaplacianDeformer (pcl_ext/deform) under the constraints of a
-// constraints JSON file (docs/constraints_json.md), applied to each frame's mesh. Only parameter
-// mapping lives here; the file is read once and checked against each mesh it is applied to.
+// Built-in stages "deform": tbsp::LaplacianDeformer (pcl_ext/deform) under the constraints of a
+// constraints JSON file (docs/constraints_json.md), and "tetdeform": tbsp::TetDeformer + transfer
+// (the steps of `tbsp tetdeform`, tet_job_run.h) under a handles JSON (docs/tetdeform_json.md),
+// applied to each frame's mesh. Only parameter mapping lives here; the files are read once and
+// checked against each mesh they are applied to.
 #include "stage_util.h"
 #include "tbsp/deform/laplacian_deformer.h"
 #include "tbsp/plugins/constraints_json.h"
 #include "tbsp/plugins/json_file.h"
+#include "tbsp/plugins/tet_job_run.h"
 
 namespace tbsp::pipeline::builtin {
 namespace {
@@ -38,6 +41,52 @@ private:
   bool field_, uniform_;
 };
 
+class TetDeform : public Stage {
+public:
+  explicit TetDeform(const Params& p)
+      : handles_(p.text("handles")), rigid_(p.text("rigid")), stiffness_(p.text("stiffness")), handles_doc_(load_json_file(handles_)),
+        tets_(int(p.integer("tets"))), iterations_(int(p.integer("iterations"))), interpolation_(p.boolean("rotation_interpolation")) {
+    if (!rigid_.empty()) rigid_doc_ = load_json_file(rigid_);
+    if (!stiffness_.empty()) stiffness_doc_ = load_json_file(stiffness_);
+  }
+  Ports process(FrameContext& ctx, const Ports& in) override {
+    const auto& mesh = in.at("mesh").mesh;
+    // the same mesh object as last frame (a constant source): the same result
+    if (mesh == last_in_ && last_out_) return {{"mesh", Data::of(last_out_)}};
+    const TetJobSetup setup = tet_job_setup(*mesh, tets_, "node '" + ctx.node + "' mesh");
+    TetJob job;  // indices checked against this mesh
+    parse_tet_handles(handles_doc_, setup.numInputVertices(), handles_, job);
+    if (!rigid_.empty()) parse_tet_rigid(rigid_doc_, setup.numInputVertices(), rigid_, job);
+    if (!stiffness_.empty()) parse_tet_stiffness(stiffness_doc_, setup.numInputVertices(), stiffness_, job);
+    TetDeformer d;
+    d.setMesh(setup.tets);
+    TetDeformerOptions o;
+    o.rotation_interpolation = interpolation_ && job.rotation_interpolation.value_or(true);
+    if (job.max_step_degrees) o.max_handle_step_deg = *job.max_step_degrees;
+    d.setOptions(o);
+    apply_tet_job(setup, job, {handles_, rigid_}, d);
+    d.setProgressCallback(ctx.progress);
+    try {
+      d.deform(iterations_ > 0 ? iterations_ : job.iterations.value_or(50));
+    } catch (const InvalidInput& e) {
+      throw InvalidInput(handles_ + ": " + e.what());  // handle-set problems surface at the first solve
+    }
+    const TetDeformReport& r = d.report();
+    ctx.numbers = {{"iterations", double(r.iterations)}, {"converged", r.converged ? 1.0 : 0.0}, {"volume_ratio", r.volume_ratio},
+                   {"max_handle_residual", r.max_handle_residual}, {"tets", double(r.tets)}};
+    last_in_ = mesh;
+    last_out_ = std::make_shared<const TriMesh>(deformed_surface(setup, d));
+    return {{"mesh", Data::of(last_out_)}};
+  }
+
+private:
+  std::string handles_, rigid_, stiffness_;
+  nlohmann::json handles_doc_, rigid_doc_, stiffness_doc_;
+  int tets_, iterations_;
+  bool interpolation_;
+  std::shared_ptr<const TriMesh> last_in_, last_out_;
+};
+
 }  // namespace
 
 void register_deform_stages(Registry& r) {
@@ -48,6 +97,17 @@ void register_deform_stages(Registry& r) {
   s.inputs = {{"mesh", DataType::Mesh, "the mesh to deform"}};
   s.outputs = {{"mesh", DataType::Mesh, "the deformed mesh (same connectivity)"}};
   r.add(s, [](const Params& p) { return std::make_unique<Deform>(p); });
+  StageInfo t{"tetdeform", "tbsp::TetDeformer: volumetric as-rigid-as-possible deformation of each frame's closed mesh under "
+                           "the handles of a JSON file, transferred to the full mesh (thesis ch. 7; docs/tet_deformation.md)"};
+  t.params = {ParamSpec::input_path("handles", "handles JSON (docs/tetdeform_json.md)", true),
+              ParamSpec::input_path("rigid", "rigid regions JSON {\"rigid\": [region, ...]}", false),
+              ParamSpec::input_path("stiffness", "stiffness JSON {\"default\": s, \"regions\": [...]}", false),
+              ParamSpec::integer("tets", "0", "target tetrahedron count (QEM decimation first); 0: full resolution", 0, 100000000),
+              ParamSpec::integer("iterations", "0", "iterations; 0: the handles file's, else 50", 0, 100000),
+              ParamSpec::boolean("rotation_interpolation", true, "step (III) of ch. 7 (false: off, as --no-rotation-interpolation)")};
+  t.inputs = {{"mesh", DataType::Mesh, "a closed, manifold triangle mesh"}};
+  t.outputs = {{"mesh", DataType::Mesh, "the deformed mesh (same connectivity)"}};
+  r.add(t, [](const Params& p) { return std::make_unique<TetDeform>(p); });
 }
 
 }  // namespace tbsp::pipeline::builtin

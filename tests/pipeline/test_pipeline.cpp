@@ -253,3 +253,43 @@ TEST(PipelineRun, DeformStageEqualsTheDeformCommand) {
   EXPECT_GT((a.V - rest.V).rowwise().norm().maxCoeff(), 0.3);  // the far end did move
   fs::remove_all(dir);
 }
+
+// tetdeform stage: the library call behind `tbsp tetdeform` (tet_job_run.h), so the same bits.
+TEST(PipelineRun, TetDeformStageEqualsTheTetDeformCommand) {
+  const fs::path dir = tbsp::test::temp_dir("pipeline_tetdeform");
+  const std::string cli = TBSP_CLI, box = (dir / "box.ply").string(), handles = tbsp::test::sample("bar_twist_tet.json");
+  ASSERT_EQ(WEXITSTATUS(std::system((cli + " generate box --level 1 --out " + box).c_str())), 0);
+  write_text(dir / "p.yaml", "stages:\n  - {id: bar, stage: read-mesh, params: {path: " + box + "}}\n"
+                             "  - {id: twisted, stage: tetdeform, input: bar, params: {handles: " + handles + ", iterations: 8}}\n"
+                             "  - {id: out, stage: write-mesh, input: twisted, params: {path: twisted.ply}}\n");
+  const RunReport r = run_pipeline(load_pipeline((dir / "p.yaml").string(), builtin()), builtin());
+  EXPECT_EQ(r.frames.at(0).numbers.at("twisted").at("iterations"), 8);
+  ASSERT_EQ(WEXITSTATUS(std::system((cli + " tetdeform -q --iterations 8 --mesh " + box + " --handles " + handles + " --out " +
+                                     (dir / "cli.ply").string()).c_str())), 0);
+  const tbsp::TriMesh a = tbsp::read_mesh((dir / "twisted.ply").string()), b = tbsp::read_mesh((dir / "cli.ply").string()),
+                      rest = tbsp::read_mesh(box);
+  ASSERT_EQ(a.V.rows(), b.V.rows());
+  EXPECT_LT((a.V - b.V).cwiseAbs().maxCoeff(), 1e-9);
+  // the left end (x <= 0.05) is held; the bar is twisted in between (mid-length points moved)
+  double left = 0, mid = 0;
+  for (Eigen::Index i = 0; i < rest.V.rows(); ++i) {
+    const double d = (a.V.row(i) - rest.V.row(i)).norm();
+    if (rest.V(i, 0) <= 0.05) left = std::max(left, d);
+    if (std::abs(rest.V(i, 0) - 0.5) < 0.1) mid = std::max(mid, d);
+  }
+  EXPECT_LT(left, 1e-6);
+  EXPECT_GT(mid, 0.05);
+  // a handle file that does not fit the mesh names the file and the entry, with exit 2 from `tbsp run`
+  write_text(dir / "bad.json", R"({"handles": [{"vertex": 100000, "target": [0, 0, 0]}]})");
+  write_text(dir / "bad.yaml", "stages:\n  - {id: bar, stage: read-mesh, params: {path: " + box + "}}\n"
+                               "  - {id: twisted, stage: tetdeform, input: bar, params: {handles: bad.json}}\n"
+                               "  - {id: out, stage: write-mesh, input: twisted, params: {path: bad.ply}}\n");
+  const std::string log = (dir / "bad.log").string();
+  EXPECT_EQ(WEXITSTATUS(std::system((cli + " run -q " + (dir / "bad.yaml").string() + " 2> " + log).c_str())), 2);
+  std::ifstream in(log);
+  const std::string msg((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(msg.find("bad.json"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("handles[0]"), std::string::npos) << msg;
+  EXPECT_FALSE(fs::exists(dir / "bad.ply"));
+  fs::remove_all(dir);
+}
