@@ -9,4 +9,5 @@ TBSP_STAGE_PLUGIN(registry) {
   tbsp::pipeline::builtin::register_fit_stages(registry);
   tbsp::pipeline::builtin::register_deform_stages(registry);
   tbsp::pipeline::builtin::register_mesh_stages(registry);
+  tbsp::pipeline::builtin::register_texture_stages(registry);
 }

@@ -50,5 +50,6 @@ void register_pcl_stages(Registry& r);
 void register_fit_stages(Registry& r);
 void register_deform_stages(Registry& r);
 void register_mesh_stages(Registry& r);
+void register_texture_stages(Registry& r);
 
 }  // namespace tbsp::pipeline::builtin

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "../fitting/texture_test_util.h"
 #include "test_util.h"
 #include "tbsp/io/cloud_io.h"
 #include "tbsp/io/mesh_io.h"
@@ -293,3 +294,43 @@ TEST(PipelineRun, TetDeformStageEqualsTheTetDeformCommand) {
   EXPECT_FALSE(fs::exists(dir / "bad.ply"));
   fs::remove_all(dir);
 }
+
+// texture stage: the image is a colour ramp (red = x, green = y), so each vertex's colour says
+// where in the image it landed: the constrained vertices land on their pixels.
+TEST(PipelineRun, TextureStageColoursEachVertexFromItsTexturePosition) {
+  const std::string mesh = tbsp::test::shared("meshes/cfwen__geometry-processing-package/data/face.off");
+  TBSP_REQUIRE_FILE(mesh);
+  const fs::path dir = tbsp::test::temp_dir("pipeline_texture");
+  const int W = 256, H = 192;
+  {
+    std::ofstream ppm(dir / "ramp.ppm", std::ios::binary);
+    ppm << "P6\n" << W << " " << H << "\n255\n";
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) ppm << char(std::lround(255.0 * x / (W - 1))) << char(std::lround(255.0 * y / (H - 1))) << char(0);
+  }
+  const tbsp::TriMesh m = tbsp::read_mesh(mesh);
+  const auto cons = tbsp::test::layout_constraints(m.V, tbsp::test::reference_layout(m.V, W, H, false, &m.F), W, H, 12, false);
+  std::string json = "{\"constraints\": [";
+  for (std::size_t i = 0; i < cons.size(); ++i)
+    json += (i ? ", " : "") + std::string("{\"pixel\": [") + std::to_string(cons[i].pixel.x()) + ", " + std::to_string(cons[i].pixel.y()) +
+            "], \"vertex\": " + std::to_string(cons[i].vertex) + "}";
+  write_text(dir / "c.json", json + "]}");
+  write_text(dir / "p.yaml", "stages:\n  - {id: face, stage: read-mesh, params: {path: " + mesh + "}}\n"
+                             "  - {id: tex, stage: texture, input: face, params: {image: ramp.ppm, constraints: c.json}}\n"
+                             "  - {id: out, stage: write-mesh, input: tex, params: {path: face_tex.ply}}\n");
+  const RunReport r = run_pipeline(load_pipeline((dir / "p.yaml").string(), builtin()), builtin());
+  const auto& num = r.frames.at(0).numbers.at("tex");
+  EXPECT_LT(num.at("max_constraint_residual_px"), 1.0);
+  EXPECT_GT(num.at("matched_fraction"), 0.5);
+  const tbsp::TriMesh out = tbsp::read_mesh((dir / "face_tex.ply").string());
+  ASSERT_EQ(out.C.rows(), m.V.rows());
+  double worst = 0;
+  for (const auto& c : cons) {  // the ramp decoded: 8-bit steps of (W-1)/255 = 1 px
+    const Eigen::Vector2d at(out.C(c.vertex, 0) * (W - 1), out.C(c.vertex, 1) * (H - 1));
+    worst = std::max(worst, (at - c.pixel).norm());
+  }
+  std::printf("texture stage: worst constrained vertex %.2f px from its pixel\n", worst);
+  EXPECT_LT(worst, 3.0);
+  fs::remove_all(dir);
+}
+
