@@ -1,4 +1,4 @@
-// Built-in sources and sinks: read-cloud, read-mesh, read-depth, write-cloud, write-mesh,
+// Built-in sources and sinks: read-cloud, read-mesh, read-depth, read-markers, write-cloud, write-mesh,
 // render-png. They wrap capture_io's readers and writers (no file-format code here).
 #include <pcl/common/io.h>
 #include <pcl/conversions.h>
@@ -14,6 +14,7 @@
 #include "tbsp/io/cloud_io.h"
 #include "tbsp/io/depth_io.h"
 #include "tbsp/io/mesh_io.h"
+#include "tbsp/io/mocap_io.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/plugins/preview_render.h"
 
@@ -201,6 +202,47 @@ private:
   int normals_k_ = 0;
 };
 
+// Motion-capture markers (C3D / TRC): one cloud per frame, the markers seen in that frame.
+class ReadMarkers : public Stage {
+public:
+  explicit ReadMarkers(const Params& p) : path_(p.text("path")) {
+    const std::string ext = fs::path(path_).extension().string();
+    if (ext == ".c3d" || ext == ".C3D") m_ = read_c3d(path_);
+    else if (ext == ".trc" || ext == ".TRC") m_ = read_trc(path_);
+    else throw InvalidInput("'" + path_ + "': not a motion-capture file (.c3d or .trc)");
+    if (m_.numFrames() == 0) throw FileError("'" + path_ + "': the file has no frame");
+    if (p.boolean("metres")) {
+      const std::string u = m_.units;
+      if (u == "mm") scale_ = 1e-3;
+      else if (u == "cm") scale_ = 1e-2;
+      else if (u == "m") scale_ = 1.0;
+      else throw InvalidInput("'" + path_ + "': units '" + u + "' cannot be converted to metres; set 'metres: false' to keep the file's units");
+    }
+  }
+  std::vector<int> frames() override {
+    std::vector<int> f(std::size_t(m_.numFrames()));
+    for (int i = 0; i < m_.numFrames(); ++i) f[std::size_t(i)] = i;
+    return f;
+  }
+  Ports process(FrameContext& ctx, const Ports&) override {
+    CloudN::Ptr c(new CloudN);
+    for (int k = 0; k < m_.numMarkers(); ++k)
+      if (m_.valid(ctx.frame, k)) {
+        pcl::PointNormal q;
+        q.getVector3fMap() = (scale_ * m_.position(ctx.frame, k)).cast<float>();
+        q.normal_x = q.normal_y = q.normal_z = 0;
+        c->push_back(q);
+      }
+    if (c->empty()) throw InvalidInput("'" + path_ + "' frame " + std::to_string(ctx.frame) + ": no marker is seen in this frame");
+    return {{"cloud", Data::of(c, false)}};
+  }
+
+private:
+  std::string path_;
+  MarkerTrajectories m_;
+  double scale_ = 1.0;
+};
+
 std::string out_path(const std::string& pattern, int frame) { return is_pattern(pattern) ? expand_frame_pattern(pattern, frame) : pattern; }
 
 class WriteMesh : public Stage {
@@ -294,6 +336,13 @@ void register_io_stages(Registry& r) {
                  {"grid", DataType::Cloud, "the same points organized as the image (width x height, NaN where no depth): for pcl.organized-fast-mesh"}};
     s.frame_ordered = true;  // .oni recordings: read forwards by one reader (see keeps_state)
     r.add(s, [](const Params& p) { return std::make_unique<ReadDepth>(p); });
+  }
+  {
+    StageInfo s{"read-markers", "motion capture (C3D or TRC): per frame, the positions of the markers seen in that frame as a cloud"};
+    s.params = {ParamSpec::input_path("path", "the .c3d or .trc file; frame k is its k-th frame (from 0)", true),
+                ParamSpec::boolean("metres", true, "convert the file's units (mm, cm, m) to metres")};
+    s.outputs = {{"cloud", DataType::Cloud, "the markers seen in this frame, in marker order (gaps left out)"}};
+    r.add(s, [](const Params& p) { return std::make_unique<ReadMarkers>(p); });
   }
   {
     StageInfo s{"write-mesh", "writes the mesh of each frame (.ply .obj .off .vtk); files appear only when the whole run succeeded"};

@@ -13,6 +13,7 @@
 #include "tbsp/io/cloud_io.h"
 #include "tbsp/io/depth_io.h"
 #include "tbsp/io/mesh_io.h"
+#include "tbsp/io/mocap_io.h"
 #include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/plugins/pipeline.h"
 #include "tbsp/plugins/synth_studio.h"
@@ -210,3 +211,34 @@ TEST(PipelineReplay, StudioDepthImagesInWorldCoordinatesFitEveryFrame) {
   EXPECT_LT(dist.back(), 0.015);
   fs::remove_all(dir);
 }
+
+// read-markers: the CMU 01_01 C3D (mm, gaps) as one cloud of markers per frame, in metres.
+TEST(PipelineReplay, MocapMarkersAsCloudsPerFrame) {
+  const std::string c3d = tbsp::test::shared("capture/surenkum__c3d_to_xyz/01_01.c3d");
+  TBSP_REQUIRE_FILE(c3d);
+  const fs::path dir = tbsp::test::temp_dir("pipeline_markers");
+  Registry reg;
+  reg.load_default_path();
+  const std::string y = "frames: 0:4\nstages:\n  - {id: m, stage: read-markers, params: {path: " + c3d +
+                        "}}\n  - {id: w, stage: write-cloud, input: m, params: {path: m_%04d.pcd}}\n";
+  const RunReport r = run_pipeline(parse_pipeline(y, dir.string(), "m.yaml", reg), reg);
+  ASSERT_EQ(r.frames.size(), 5u);
+  const tbsp::MarkerTrajectories m = tbsp::read_c3d(c3d);
+  ASSERT_EQ(m.units, "mm");
+  for (int f = 0; f < 5; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "m_%04d.pcd", f);
+    const auto c = tbsp::read_cloud_normals((dir / name).string());
+    std::size_t j = 0;
+    for (int k = 0; k < m.numMarkers(); ++k) {
+      if (!m.valid(f, k)) continue;
+      ASSERT_LT(j, c->size()) << name;
+      EXPECT_LT(((*c)[j].getVector3fMap().cast<double>() - 1e-3 * m.position(f, k)).norm(), 1e-5) << name << " marker " << k;
+      ++j;
+    }
+    EXPECT_EQ(j, c->size()) << name;  // gaps left out, nothing else
+    EXPECT_GE(j, 40u) << name;        // 41 of 42 markers are seen at the start (MANIFEST)
+  }
+  fs::remove_all(dir);
+}
+
