@@ -77,9 +77,7 @@ TriMesh y_up(const TriMesh& m, const Eigen::Matrix4d& alignment) {
 }
 
 int cmd_animate(const AnimateArgs& a) {
-  const std::string ext = lower_ext(a.markers);
-  if (ext != ".c3d" && ext != ".trc") throw InvalidInput(a.markers + ": expected a .c3d or .trc file of marker trajectories");
-  const MarkerTrajectories mk = ext == ".c3d" ? read_c3d(a.markers) : read_trc(a.markers);
+  const MarkerTrajectories mk = read_markers(a.markers);
   const auto [f0, f1] = parse_range(a.frames, mk);
   const TriMesh tmpl = read_mesh(a.mesh);
   const MarkerMap map = load_marker_map(a.map);

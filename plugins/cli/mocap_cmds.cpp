@@ -39,8 +39,8 @@ MarkerGaps marker_gaps(const MarkerTrajectories& m, int k) {
   return g;
 }
 
-int markers_cmd(const MocapArgs& a, const std::string& ext) {
-  const MarkerTrajectories m = ext == ".c3d" ? read_c3d(a.input) : read_trc(a.input);
+int markers_cmd(const MocapArgs& a) {
+  const MarkerTrajectories m = read_markers(a.input);
   std::vector<MarkerGaps> gaps;
   int with_gaps = 0, missing = 0;
   for (int k = 0; k < m.numMarkers(); ++k) {
@@ -157,7 +157,7 @@ void add_mocap(CLI::App& app, MocapArgs& a, CLI::App*& sub) {
 
 int cmd_mocap(const MocapArgs& a) {
   const std::string ext = lower_ext(a.input);
-  if (ext == ".trc" || ext == ".c3d") return markers_cmd(a, ext);
+  if (ext == ".trc" || ext == ".c3d") return markers_cmd(a);
   if (ext == ".bvh") return bvh_cmd(a);
   throw InvalidInput("'" + a.input + "': unknown motion-capture format '" + ext + "' (tbsp mocap reads .trc, .c3d and .bvh)");
 }

@@ -14,7 +14,6 @@
 #include "tbsp/io/atomic_file.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/tet_mesh_io.h"
-#include "tbsp/plugins/json_file.h"
 #include "tbsp/plugins/tet_job_json.h"
 #include "tbsp/plugins/tet_job_run.h"
 
@@ -55,20 +54,15 @@ int cmd_tetdeform(const TetDeformArgs& a) {
   const Eigen::Index n_in = setup.numInputVertices();
 
   // 2. job files
-  TetJob job;
-  parse_tet_handles(load_json_file(a.handles), n_in, a.handles, job);
-  if (!a.rigid.empty()) parse_tet_rigid(load_json_file(a.rigid), n_in, a.rigid, job);
-  if (!a.stiffness.empty()) parse_tet_stiffness(load_json_file(a.stiffness), n_in, a.stiffness, job);
+  const TetJobFiles files = TetJobFiles::load(a.handles, a.rigid, a.stiffness);
+  const TetJob job = files.parse(n_in);
 
   // 3. deformer
   TetDeformer d;
   d.setMesh(tets);
-  TetDeformerOptions o;
-  if (job.rotation_interpolation) o.rotation_interpolation = *job.rotation_interpolation;
-  if (a.no_interpolation) o.rotation_interpolation = false;
-  if (job.max_step_degrees) o.max_handle_step_deg = *job.max_step_degrees;
+  const TetDeformerOptions o = tet_job_options(job, !a.no_interpolation);
   d.setOptions(o);
-  apply_tet_job(setup, job, {a.handles, a.rigid}, d);
+  apply_tet_job(setup, job, files, d);
   ProgressBar bar(!a.quiet);
   d.setProgressCallback(bar.callback());
   const int iterations = a.iterations > 0 ? a.iterations : job.iterations.value_or(50);

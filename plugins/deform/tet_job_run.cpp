@@ -9,6 +9,7 @@
 #include "tbsp/deform/deformation_transfer.h"
 #include "tbsp/mesh/point_search.h"
 #include "tbsp/mesh/tetrahedralize.h"
+#include "tbsp/plugins/json_file.h"
 
 namespace tbsp {
 namespace {
@@ -64,7 +65,34 @@ TetJobSetup tet_job_setup(const TetMesh& tets) {
   return s;
 }
 
-void apply_tet_job(const TetJobSetup& s, const TetJob& job, const TetJobSources& names, TetDeformer& d) {
+TetJobFiles TetJobFiles::load(const std::string& handles, const std::string& rigid, const std::string& stiffness) {
+  TetJobFiles f;
+  f.handles = handles;
+  f.rigid = rigid;
+  f.stiffness = stiffness;
+  f.handles_doc = load_json_file(handles);
+  if (!rigid.empty()) f.rigid_doc = load_json_file(rigid);
+  if (!stiffness.empty()) f.stiffness_doc = load_json_file(stiffness);
+  return f;
+}
+
+TetJob TetJobFiles::parse(Eigen::Index num_input_vertices) const {
+  TetJob job;
+  parse_tet_handles(handles_doc, num_input_vertices, handles, job);
+  if (!rigid.empty()) parse_tet_rigid(rigid_doc, num_input_vertices, rigid, job);
+  if (!stiffness.empty()) parse_tet_stiffness(stiffness_doc, num_input_vertices, stiffness, job);
+  return job;
+}
+
+TetDeformerOptions tet_job_options(const TetJob& job, bool rotation_interpolation) {
+  TetDeformerOptions o;
+  if (job.rotation_interpolation) o.rotation_interpolation = *job.rotation_interpolation;
+  if (!rotation_interpolation) o.rotation_interpolation = false;
+  if (job.max_step_degrees) o.max_handle_step_deg = *job.max_step_degrees;
+  return o;
+}
+
+void apply_tet_job(const TetJobSetup& s, const TetJob& job, const TetJobFiles& names, TetDeformer& d) {
   if (!job.stiffness.empty() || job.default_stiffness != 1.0) {
     Eigen::VectorXd st = Eigen::VectorXd::Constant(s.tets.T.rows(), job.default_stiffness);
     for (const auto& [r, v] : job.stiffness)

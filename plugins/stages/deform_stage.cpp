@@ -44,32 +44,23 @@ private:
 class TetDeform : public Stage {
 public:
   explicit TetDeform(const Params& p)
-      : handles_(p.text("handles")), rigid_(p.text("rigid")), stiffness_(p.text("stiffness")), handles_doc_(load_json_file(handles_)),
-        tets_(int(p.integer("tets"))), iterations_(int(p.integer("iterations"))), interpolation_(p.boolean("rotation_interpolation")) {
-    if (!rigid_.empty()) rigid_doc_ = load_json_file(rigid_);
-    if (!stiffness_.empty()) stiffness_doc_ = load_json_file(stiffness_);
-  }
+      : files_(TetJobFiles::load(p.text("handles"), p.text("rigid"), p.text("stiffness"))), tets_(int(p.integer("tets"))),
+        iterations_(int(p.integer("iterations"))), interpolation_(p.boolean("rotation_interpolation")) {}
   Ports process(FrameContext& ctx, const Ports& in) override {
     const auto& mesh = in.at("mesh").mesh;
     // the same mesh object as last frame (a constant source): the same result
     if (mesh == last_in_ && last_out_) return {{"mesh", Data::of(last_out_)}};
     const TetJobSetup setup = tet_job_setup(*mesh, tets_, "node '" + ctx.node + "' mesh");
-    TetJob job;  // indices checked against this mesh
-    parse_tet_handles(handles_doc_, setup.numInputVertices(), handles_, job);
-    if (!rigid_.empty()) parse_tet_rigid(rigid_doc_, setup.numInputVertices(), rigid_, job);
-    if (!stiffness_.empty()) parse_tet_stiffness(stiffness_doc_, setup.numInputVertices(), stiffness_, job);
+    const TetJob job = files_.parse(setup.numInputVertices());  // indices checked against this mesh
     TetDeformer d;
     d.setMesh(setup.tets);
-    TetDeformerOptions o;
-    o.rotation_interpolation = interpolation_ && job.rotation_interpolation.value_or(true);
-    if (job.max_step_degrees) o.max_handle_step_deg = *job.max_step_degrees;
-    d.setOptions(o);
-    apply_tet_job(setup, job, {handles_, rigid_}, d);
+    d.setOptions(tet_job_options(job, interpolation_));
+    apply_tet_job(setup, job, files_, d);
     d.setProgressCallback(ctx.progress);
     try {
       d.deform(iterations_ > 0 ? iterations_ : job.iterations.value_or(50));
     } catch (const InvalidInput& e) {
-      throw InvalidInput(handles_ + ": " + e.what());  // handle-set problems surface at the first solve
+      throw InvalidInput(files_.handles + ": " + e.what());  // handle-set problems surface at the first solve
     }
     const TetDeformReport& r = d.report();
     ctx.numbers = {{"iterations", double(r.iterations)}, {"converged", r.converged ? 1.0 : 0.0}, {"volume_ratio", r.volume_ratio},
@@ -80,8 +71,7 @@ public:
   }
 
 private:
-  std::string handles_, rigid_, stiffness_;
-  nlohmann::json handles_doc_, rigid_doc_, stiffness_doc_;
+  TetJobFiles files_;
   int tets_, iterations_;
   bool interpolation_;
   std::shared_ptr<const TriMesh> last_in_, last_out_;

@@ -205,18 +205,14 @@ private:
 // Motion-capture markers (C3D / TRC): one cloud per frame, the markers seen in that frame.
 class ReadMarkers : public Stage {
 public:
-  explicit ReadMarkers(const Params& p) : path_(p.text("path")) {
-    const std::string ext = fs::path(path_).extension().string();
-    if (ext == ".c3d" || ext == ".C3D") m_ = read_c3d(path_);
-    else if (ext == ".trc" || ext == ".TRC") m_ = read_trc(path_);
-    else throw InvalidInput("'" + path_ + "': not a motion-capture file (.c3d or .trc)");
+  explicit ReadMarkers(const Params& p) : path_(p.text("path")), m_(read_markers(path_)) {
     if (m_.numFrames() == 0) throw FileError("'" + path_ + "': the file has no frame");
     if (p.boolean("metres")) {
-      const std::string u = m_.units;
-      if (u == "mm") scale_ = 1e-3;
-      else if (u == "cm") scale_ = 1e-2;
-      else if (u == "m") scale_ = 1.0;
-      else throw InvalidInput("'" + path_ + "': units '" + u + "' cannot be converted to metres; set 'metres: false' to keep the file's units");
+      try {
+        scale_ = marker_units_to_metres(m_.units);
+      } catch (const InvalidInput& e) {
+        throw InvalidInput("'" + path_ + "': " + e.what() + "; set 'metres: false' to keep the file's units");
+      }
     }
   }
   std::vector<int> frames() override {

@@ -43,6 +43,14 @@ void write_trc(const std::string& path, const MarkerTrajectories& markers);
 /// `allow_truncated`: then the complete frames present are returned and a warning is logged.
 MarkerTrajectories read_c3d(const std::string& path, bool allow_truncated = false);
 
+/// read_c3d or read_trc by the file's extension (.c3d / .trc, any case).
+/// \throws InvalidInput naming the file for any other extension.
+MarkerTrajectories read_markers(const std::string& path);
+
+/// Metres per unit of a marker file's `units` ("mm", "cm", "m"). \throws InvalidInput for
+/// other units (the message says which).
+double marker_units_to_metres(const std::string& units);
+
 /// Writes C3D (Intel processor type, float point data, written atomically) that read_c3d and
 /// other C3D tools read back: POINT:USED/SCALE/RATE/DATA_START/FRAMES/UNITS/LABELS(2..) and an
 /// empty ANALOG group. Gaps (NaN) are written with residual -1. Frame numbers start at

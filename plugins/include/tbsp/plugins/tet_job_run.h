@@ -36,14 +36,24 @@ TetJobSetup tet_job_setup(const TriMesh& surface, int target_tets, const std::st
 /// \brief A given tet mesh (handle indices refer to its vertices).
 TetJobSetup tet_job_setup(const TetMesh& tets);
 
-/// File names for error messages ("H.json: handles[2]: ...").
-struct TetJobSources {
-  std::string handles, rigid;
+/// The job's files (handles required, rigid regions and stiffness optional: empty path), read
+/// once; parse() checks them against a mesh's vertex count (it may run for many meshes).
+struct TetJobFiles {
+  std::string handles, rigid, stiffness;           ///< paths (also named in errors)
+  nlohmann::json handles_doc, rigid_doc, stiffness_doc;
+  /// \throws FileError naming the file (missing, not JSON).
+  static TetJobFiles load(const std::string& handles, const std::string& rigid, const std::string& stiffness);
+  /// \throws FileError ("H.json: handles[2].rotate.axis: ..."), indices checked against `num_input_vertices`.
+  TetJob parse(Eigen::Index num_input_vertices) const;
 };
+
+/// \brief The deformer options a job asks for; `rotation_interpolation = false` turns step (III)
+/// off whatever the file says (--no-rotation-interpolation).
+TetDeformerOptions tet_job_options(const TetJob& job, bool rotation_interpolation = true);
 
 /// \brief Puts the job's stiffness, rigid regions and handles on `d` (whose mesh must be
 /// `s.tets`). \throws InvalidInput naming the file and the entry (a region with no vertex, ...).
-void apply_tet_job(const TetJobSetup& s, const TetJob& job, const TetJobSources& names, TetDeformer& d);
+void apply_tet_job(const TetJobSetup& s, const TetJob& job, const TetJobFiles& files, TetDeformer& d);
 
 /// \brief The deformed input surface after `d.deform()`: the surface's vertices moved, by
 /// DeformationTransfer (§7.3) when the tet mesh was decimated. `transfer_precompute_s` /
