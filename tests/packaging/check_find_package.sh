@@ -4,7 +4,7 @@
 # PCL pipeline program (VoxelGrid -> TemplateFitting -> savePLYFile) and a third-party stage
 # plugin against the installed package, and loads the plugin into the installed `tbsp`.
 set -euo pipefail
-build_dir=$1; src_dir=$2; sample=$3
+build_dir=$1; src_dir=$2; sample=$3; with_ui=${4:-OFF}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 cmake --install "$build_dir" --prefix "$work/prefix" > "$work/install.log"
@@ -25,3 +25,10 @@ echo "$stages" | grep -q "^sample.scale  \[libsample_plugin.so\]"
 echo "$stages" | grep -q "^pcl.voxel-grid  \[libtbsp_stages.so\]"
 ls "$work"/prefix/lib*/tbsp/plugins/libtbsp_stages.so > /dev/null
 echo "installed tbsp lists $(echo "$stages" | grep -c '^[a-z]') stages, the sample plugin's among them"
+# tbsp::Visualizer (libtbsp_vtk) from the installed package: a PCL cloud + heatmap, offscreen
+if [ "$with_ui" = ON ]; then
+  test -x "$work/b/viz_example" || { echo "viz_example was not built: tbsp::vtk missing from the installed package"; exit 1; }
+  viz=$(xvfb-run -a -s "-screen 0 1280x1024x24" "$work/b/viz_example" "$sample/bar_scan.ply" "$work/fit.ply" "$work/viz.png")
+  echo "viz_example printed: $viz"
+  test -s "$work/viz.png"
+fi

@@ -36,12 +36,6 @@ int main(int argc, char** argv) {
     std::cerr << "tbsp-studio: error: --size " << size << ": expected WxH, e.g. 800x600 (64 to 8192 pixels)\n";
     return 2;
   }
-  const char* display = std::getenv("DISPLAY");
-  if (display == nullptr || *display == 0) {
-    std::cerr << "tbsp-studio: error: no X display (DISPLAY is not set). tbsp-studio draws with OpenGL through X: run it "
-                 "on a desktop, or headless as `xvfb-run -a tbsp-studio ...` (Debian: apt-get install xvfb)\n";
-    return 2;
-  }
   // check the script before anything opens: a malformed file is an error of its own
   nlohmann::json checked;
   if (!script.empty()) {
@@ -55,6 +49,12 @@ int main(int argc, char** argv) {
   // No multisampling: VTK's default asks for 8 samples, which costs a software-OpenGL view (Xvfb,
   // virtual machines) 2-3x its frame time and makes screenshots differ between drivers.
   vtkOpenGLRenderWindow::SetGlobalMaximumNumberOfMultiSamples(0);
+  const char* display = std::getenv("DISPLAY");
+  if (display == nullptr || *display == 0) {
+    std::cerr << "tbsp-studio: error: no X display (DISPLAY is not set). tbsp-studio draws with OpenGL through X: run it "
+                 "on a desktop, or headless as `xvfb-run -a tbsp-studio ...` (Debian: apt-get install xvfb)\n";
+    return 2;
+  }
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication app(argc, argv);
   const bool scripted = !screenshot.empty() || !script.empty();

@@ -1,0 +1,69 @@
+// The editing session of tbsp-studio without UI (label unit): documents, undo, replay.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+
+#include "edit_session.h"
+#include "tbsp/core/error.h"
+#include "tbsp/io/mesh_io.h"
+#include "test_util.h"
+
+using tbsp::test::sample;
+using tbsp::test::temp_dir;
+
+TEST(EditSession, BestRigidMotionRecoversAKnownMotion) {
+  Eigen::MatrixX3d a(5, 3);
+  a << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1;
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  const Eigen::Vector3d t(0.3, -0.2, 0.5);
+  const Eigen::MatrixX3d b = (a * R.transpose()).rowwise() + t.transpose();
+  const tbsp::RigidMotion m = tbsp::studio::best_rigid_motion(a, b);
+  for (Eigen::Index i = 0; i < a.rows(); ++i)
+    EXPECT_LT((m.apply(a.row(i).transpose()) - b.row(i).transpose()).norm(), 1e-12);
+}
+
+TEST(EditSession, DocumentsUndoRedoAndWarmIterationsConvergeToTheReplay) {
+  tbsp::studio::EditSession s;
+  EXPECT_THROW(s.addHandle({{"vertices", {0}}}), tbsp::InvalidInput) << "no mesh open";
+  s.open(sample("bumpy_bar.off"), 0);
+  const Eigen::Index n = s.setup().surface.V.rows();
+  EXPECT_THROW(s.addHandle({{"vertices", {0, int(n)}}}), tbsp::InvalidInput);
+  EXPECT_THROW(s.addHandle({{"sphere", {{"center", {9, 9, 9}}, {"radius", 0.01}}}}), tbsp::InvalidInput);
+  EXPECT_EQ(s.numHandles(), 0) << "refused edits change nothing";
+  ASSERT_NO_THROW(s.addHandle({{"box", {{"min", {-1, -1, -1}}, {"max", {0.05, 1, 1}}}}})) << "b1";
+  ASSERT_NO_THROW(s.addHandle({{"box", {{"min", {0.95, -1, -1}}, {"max", {2, 1, 1}}}}})) << "b2";
+  s.setHandleMotion(1, {0, 0.3, 0});
+  s.setHandleMotion(1, {0, 0.4, 0}, Eigen::Vector3d::UnitZ(), 0, Eigen::Vector3d::Zero(), /*undoable=*/false);
+  EXPECT_NEAR(s.handleMotion(1).translation.y(), 0.4, 1e-15);
+  // warm-started iterations (what the view shows) approach the replay from rest (what is saved)
+  s.requestIterations(400);
+  s.waitIdle();
+  const tbsp::TriMesh replay = s.replay(400);
+  EXPECT_LT((s.currentSurface() - replay.V).cwiseAbs().maxCoeff(), 2e-3 * tbsp::bbox_diagonal(replay.V));
+  EXPECT_GT((replay.V - s.setup().surface.V).rowwise().norm().maxCoeff(), 0.35);
+  // the drag was one undo step (the second move merged into it)
+  ASSERT_TRUE(s.undo());
+  EXPECT_NEAR(s.handleMotion(1).translation.norm(), 0.0, 1e-15);
+  ASSERT_TRUE(s.redo());
+  EXPECT_NEAR(s.handleMotion(1).translation.y(), 0.4, 1e-15);
+  ASSERT_TRUE(s.undo());
+  ASSERT_TRUE(s.undo());
+  ASSERT_TRUE(s.undo());
+  EXPECT_EQ(s.numHandles(), 0);
+  EXPECT_FALSE(s.undo());
+  // saving without handles is refused; a failed save leaves nothing
+  const auto dir = temp_dir("edit_session");
+  EXPECT_THROW(s.save((dir / "m.ply").string(), (dir / "h.json").string(), "", "", 10), tbsp::InvalidInput);
+  EXPECT_FALSE(std::filesystem::exists(dir / "m.ply"));
+  // a handle added to a deformed shape holds it where it is
+  s.redo();
+  s.redo();
+  s.redo();
+  s.requestIterations(400);
+  s.waitIdle();
+  const Eigen::MatrixX3d before = s.currentSurface();
+  s.addHandle({{"sphere", {{"center", {0.5, 0.1, 0}}, {"radius", 0.05}}}});
+  s.requestIterations(50);
+  s.waitIdle();
+  EXPECT_LT((s.currentSurface() - before).cwiseAbs().maxCoeff(), 0.02) << "adding a handle does not snap the shape";
+}
