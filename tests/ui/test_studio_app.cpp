@@ -4,6 +4,7 @@
 
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <sys/wait.h>
@@ -232,4 +233,41 @@ TEST(StudioApp, MalformedScriptOrArgumentsAreRefusedUpFront) {
   r = run("env -u DISPLAY " + std::string(TBSP_STUDIO), "--screenshot x.png", dir);
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("xvfb-run"), std::string::npos) << r.err;
+}
+
+TEST(StudioApp, StudioCamerasWithImagesAndASequenceOnTheTimeline) {
+  const auto dir = temp_dir("studio_seq");
+  const Proc g = cli("synth-studio --out studio --cameras 4 --width 200 --height 200 --frames 3 -q", dir);
+  ASSERT_EQ(g.rc, 0) << g.err;
+  write(dir / "script.json", R"({"actions": [
+    {"open": "studio/studio.yaml"},
+    {"frame": 2},
+    {"screenshot": "studio.png"},
+    {"open": "studio/gt"},
+    {"screenshot": "f0.png"},
+    {"frame": 2},
+    {"screenshot": "f2.png"}
+  ]})");
+  const Proc r = studio("--size 400x300 --script script.json", dir);
+  ASSERT_EQ(r.rc, 0) << r.err;
+  // the camera frustums (blue lines) and the textured camera images (colourful) are drawn
+  const cv::Mat img = cv::imread((dir / "studio.png").string());
+  int blue = 0, colourful = 0;
+  for (int y = 0; y < img.rows; ++y)
+    for (int x = 0; x < img.cols; ++x) {
+      const cv::Vec3b p = img.at<cv::Vec3b>(y, x);
+      blue += p[0] > 150 && p[2] < 80 && p[1] < 120;
+      const int mx = std::max({p[0], p[1], p[2]}), mn = std::min({p[0], p[1], p[2]});
+      colourful += mx - mn > 60 && !(p[0] > 150 && p[2] < 80 && p[1] < 120);
+    }
+  EXPECT_GT(blue, 100) << "camera frustums";
+  EXPECT_GT(colourful, 20) << "camera images on the image planes";
+  // the sequence plays: frame 2 differs from frame 0 where the performer moved
+  const cv::Mat f0 = cv::imread((dir / "f0.png").string()), f2 = cv::imread((dir / "f2.png").string());
+  ASSERT_FALSE(f0.empty());
+  ASSERT_FALSE(f2.empty());
+  EXPECT_GT(foreground(f0).n, 1000);
+  cv::Mat diff;
+  cv::absdiff(f0, f2, diff);
+  EXPECT_GT(cv::countNonZero(diff.reshape(1) > 40), 100);
 }

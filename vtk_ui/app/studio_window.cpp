@@ -243,6 +243,11 @@ bool StudioWindow::openFile(const QString& path) {
 void StudioWindow::setFrame(int index) {
   if (index < 0 || index >= numFrames()) return;
   frame_ = index;
+  if (timeline_->value() != index) {
+    timeline_->blockSignals(true);
+    timeline_->setValue(index);
+    timeline_->blockSignals(false);
+  }
   try {
     show_frame(*viz_, scene_, index);
   } catch (const std::exception& e) {
