@@ -67,3 +67,28 @@ TEST(EditSession, DocumentsUndoRedoAndWarmIterationsConvergeToTheReplay) {
   s.waitIdle();
   EXPECT_LT((s.currentSurface() - before).cwiseAbs().maxCoeff(), 0.02) << "adding a handle does not snap the shape";
 }
+
+TEST(EditSession, SurfaceSolverFollowsDragsAndEqualsItsReplay) {
+  tbsp::studio::EditSession s;
+  s.open(sample("bumpy_bar.off"), 0, tbsp::studio::EditSolver::Surface);
+  EXPECT_EQ(s.setup().tets.T.rows(), 0) << "no tet mesh for surface editing";
+  s.addHandle({{"box", {{"min", {-1, -1, -1}}, {"max", {0.05, 1, 1}}}}});
+  s.addHandle({{"box", {{"min", {0.95, -1, -1}}, {"max", {2, 1, 1}}}}});
+  EXPECT_THROW(s.addRigid({{"box", {{"min", {0.4, -1, -1}}, {"max", {0.6, 1, 1}}}}}), tbsp::InvalidInput);
+  s.requestIterations(1);
+  s.waitIdle();
+  for (bool field : {false, true}) {
+    s.setRotationField(field);
+    for (double dy : {0.2, 0.4}) {  // the second drag re-solves with the kept factorization
+      s.setHandleMotion(1, {0, dy, 0}, Eigen::Vector3d::UnitZ(), 30, Eigen::Vector3d(1, 0, 0));
+      s.requestIterations(1);
+      s.waitIdle();
+      const tbsp::TriMesh r = s.replay(1);
+      EXPECT_LT((s.currentSurface() - r.V).cwiseAbs().maxCoeff(), 1e-9) << "field " << field << " dy " << dy;
+      EXPECT_GT((r.V - s.setup().surface.V).rowwise().norm().maxCoeff(), dy * 0.9);
+    }
+  }
+  const nlohmann::json c = s.constraintsDoc();
+  EXPECT_EQ(c["rotation_field"], true);
+  EXPECT_EQ(c["constraints"].size(), 2u);
+}

@@ -271,3 +271,40 @@ TEST(StudioApp, StudioCamerasWithImagesAndASequenceOnTheTimeline) {
   cv::absdiff(f0, f2, diff);
   EXPECT_GT(cv::countNonZero(diff.reshape(1) > 40), 100);
 }
+
+TEST(StudioApp, SurfaceEditingWithAndWithoutTheRotationFieldEqualsTbspDeform) {
+  const auto dir = temp_dir("studio_surface");
+  write(dir / "script.json", R"({"actions": [
+    {"edit": {"mesh": ")" + sample("bumpy_bar.off") + R"(", "solver": "surface"}},
+    {"select": {"rect": [0, 0, 140, 600]}},
+    {"add_handle": "selection"},
+    {"select": {"rect": [660, 0, 800, 600]}},
+    {"add_handle": "selection"},
+    {"drag": {"handle": 1, "translate": [-0.2, 0.35, 0], "rotate": {"axis": [0, 0, 1], "degrees": 80, "center": [0.95, 0, 0]}}},
+    {"wait": true},
+    {"screenshot": "off.png"},
+    {"save": {"mesh": "off.ply", "handles": "off_h.json", "constraints": "off_c.json"}},
+    {"rotation_field": true},
+    {"wait": true},
+    {"save": {"mesh": "on.ply", "handles": "on_h.json", "constraints": "on_c.json"}},
+    {"add_rigid": "selection"}
+  ]})");
+  const Proc r = studio("--script script.json", dir);
+  EXPECT_EQ(r.rc, 2) << "the rigid region is refused for surface editing";
+  EXPECT_NE(r.err.find("rigid regions belong to the tet solver"), std::string::npos) << r.err;
+  const tbsp::TriMesh rest = tbsp::read_mesh(sample("bumpy_bar.off"));
+  tbsp::TriMesh on, off;
+  for (const std::string m : {"off", "on"}) {
+    const Proc c = cli("deform --mesh " + sample("bumpy_bar.off") + " --constraints " + m + "_c.json --out cli_" + m + ".ply -q", dir);
+    ASSERT_EQ(c.rc, 0) << c.err;
+    const tbsp::TriMesh app = tbsp::read_mesh((dir / (m + ".ply")).string());
+    const tbsp::TriMesh ref = tbsp::read_mesh((dir / ("cli_" + m + ".ply")).string());
+    EXPECT_LT((app.V - ref.V).cwiseAbs().maxCoeff(), 1e-9) << m;
+    EXPECT_GT((app.V - rest.V).rowwise().norm().maxCoeff(), 0.3) << m;
+    (m == "on" ? on : off) = app;
+  }
+  // the rotation field turns the bar's cross-sections with the handle: a visibly different shape
+  EXPECT_GT((on.V - off.V).rowwise().norm().maxCoeff(), 0.01);
+  // and the view showed the dragged shape (not the rest shape) when the first screenshot was taken
+  EXPECT_LT(foreground(cv::imread((dir / "off.png").string())).cy, 290);
+}

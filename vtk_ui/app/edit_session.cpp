@@ -11,6 +11,7 @@
 #include "tbsp/io/atomic_file.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/tet_mesh_io.h"
+#include "tbsp/plugins/constraints_json.h"
 #include "tbsp/plugins/tet_job_json.h"
 #include "tbsp/solve/blas_threads.h"
 
@@ -79,15 +80,32 @@ const TetJobSetup& EditSession::setup() const {
   return *setup_;
 }
 
-void EditSession::open(const std::string& path, long target_tets) {
+// The surface solver needs no tet mesh: regions resolve against the surface's own vertices.
+static std::unique_ptr<TetJobSetup> surface_setup(const std::string& path) {
+  auto s = std::make_unique<TetJobSetup>();
+  s->surface = read_mesh(path);
+  if (s->surface.F.rows() == 0) throw InvalidInput(path + ": has no faces: surface editing needs a triangle mesh");
+  s->tets.V = s->surface.V;
+  s->to_input.resize(std::size_t(s->surface.V.rows()));
+  for (std::size_t i = 0; i < s->to_input.size(); ++i) s->to_input[i] = Eigen::Index(i);
+  s->dist.assign(s->to_input.size(), 0.0);
+  s->snap = 1e-12;
+  return s;
+}
+
+void EditSession::open(const std::string& path, long target_tets, EditSolver solver) {
   waitIdle();
-  auto s = std::make_unique<TetJobSetup>(is_tet_path(path) ? tet_job_setup(read_tet_mesh(path))
-                                                           : tet_job_setup(read_mesh(path), int(target_tets), path));
+  if (solver == EditSolver::Surface && is_tet_path(path))
+    throw InvalidInput(path + ": a tet mesh is edited with the tet solver, not the surface solver");
+  auto s = solver == EditSolver::Surface ? surface_setup(path)
+           : std::make_unique<TetJobSetup>(is_tet_path(path) ? tet_job_setup(read_tet_mesh(path))
+                                                              : tet_job_setup(read_mesh(path), int(target_tets), path));
   std::lock_guard<std::mutex> lk(m_);
   setup_ = std::move(s);
   path_ = path;
   target_tets_ = target_tets;
-  docs_ = Docs{{{"handles", nlohmann::json::array()}}, nlohmann::json(), nlohmann::json()};
+  solver_ = solver;
+  docs_ = Docs{{{"handles", nlohmann::json::array()}}, nlohmann::json(), nlohmann::json(), false};
   undo_.clear();
   redo_.clear();
   worker_docs_ = docs_;
@@ -198,6 +216,8 @@ std::vector<int> EditSession::handleSurfaceVertices(int i) const {
 
 void EditSession::addRigid(const nlohmann::json& region) {
   const auto& s = setup();
+  if (solver_ == EditSolver::Surface)
+    throw InvalidInput("rigid regions belong to the tet solver: open the mesh for volumetric editing to use them");
   TetJob probe;
   parse_tet_rigid({{"rigid", {region}}}, s.numInputVertices(), "region", probe);
   if (resolve_region_tets(probe.rigid[0], s.tets, s.to_input, s.dist, s.snap).empty())
@@ -209,6 +229,8 @@ void EditSession::addRigid(const nlohmann::json& region) {
 }
 
 void EditSession::addStiffness(const nlohmann::json& region, double st) {
+  if (solver_ == EditSolver::Surface)
+    throw InvalidInput("stiffness belongs to the tet solver: open the mesh for volumetric editing to use it");
   if (!(st > 0) || !std::isfinite(st)) throw InvalidInput("stiffness must be > 0 and finite, got " + std::to_string(st));
   edit([&](Docs& d) {
     if (d.stiffness.is_null()) d.stiffness = {{"default", 1.0}, {"regions", nlohmann::json::array()}};
@@ -221,6 +243,29 @@ void EditSession::addStiffness(const nlohmann::json& region, double st) {
 void EditSession::setRotationInterpolation(bool on) {
   edit([&](Docs& d) { d.handles["rotation_interpolation"] = on; });
 }
+
+void EditSession::setRotationField(bool on) {
+  edit([&](Docs& d) { d.rotation_field = on; });
+}
+
+nlohmann::json EditSession::constraintsDocOf(const Docs& d) const {
+  const auto& s = setup();
+  nlohmann::json c = {{"rotation_field", d.rotation_field}, {"constraints", nlohmann::json::array()},
+                      {"comment", "tbsp-studio surface edit of " + path_ + ": tbsp deform --mesh MESH --constraints THIS"}};
+  const TetJob job = parseDocs(d);
+  for (const auto& h : job.handles) {
+    const auto vs = resolve_region_vertices(h.region, s.tets.V, s.to_input, s.dist, s.snap);
+    const Eigen::Matrix3d R = h.motion.R();
+    const Eigen::Vector3d t = h.motion.center - R * h.motion.center + h.motion.translation;
+    nlohmann::json M = nlohmann::json::array();
+    for (int r = 0; r < 3; ++r) M.push_back({R(r, 0), R(r, 1), R(r, 2), t(r)});
+    M.push_back({0.0, 0.0, 0.0, 1.0});
+    c["constraints"].push_back({{"vertices", vs}, {"hard", true}, {"transform", M}});
+  }
+  return c;
+}
+
+nlohmann::json EditSession::constraintsDoc() const { return constraintsDocOf(docs_); }
 
 bool EditSession::undo() {
   std::lock_guard<std::mutex> lk(m_);
@@ -287,6 +332,7 @@ void EditSession::workerLoop() {
   omp_set_num_threads(std::max(1, int(std::thread::hardware_concurrency()) - 1));
   ScopedBlasThreads one_blas_thread(1);
   std::unique_ptr<TetDeformer> d;
+  std::unique_ptr<LaplacianDeformer> lap;
   std::unique_ptr<DeformationTransfer> transfer;
   const TetJobSetup* transfer_for = nullptr;
   std::string applied_key;
@@ -313,7 +359,37 @@ void EditSession::workerLoop() {
     const auto t0 = std::chrono::steady_clock::now();
     try {
       if (s == nullptr) throw InvalidInput("no mesh is open");
-      if (changed) {
+      if (solver_ == EditSolver::Surface) {
+        // one linear solve per change; the factorization is kept while only motions change
+        if (docs.handles["handles"].empty()) {
+          lap.reset();
+          applied_key.clear();
+          fr.surface = s->surface.V;
+          fr.rebuilt = true;
+        } else {
+          const DeformJob job = parse_constraints_json(constraintsDocOf(docs), s->surface, "constraints");
+          const std::string key = structure_key(docs.handles, docs.rigid, docs.stiffness) + (docs.rotation_field ? "|rf" : "");
+          if (!lap || key != applied_key) {
+            lap = std::make_unique<LaplacianDeformer>();
+            if (job.weights) lap->setLaplacianWeights(*job.weights);
+            lap->setMesh(s->surface);
+            for (const auto& c : job.constraints) lap->addConstraint(c);
+            lap->setUseRotationField(job.rotation_field.value_or(false));
+            lap->setScale(job.scale);
+            applied_key = key;
+            fr.rebuilt = true;
+          } else {
+            for (std::size_t i = 0; i < job.constraints.size(); ++i) {
+              lap->setPositionTarget(int(i), job.constraints[i].target);
+              lap->setConstraintRotation(int(i), job.constraints[i].rotation);
+            }
+          }
+          fr.surface = lap->deform();
+          fr.iteration = ++iterations_;
+        }
+        applied_version = version;
+        stop_now = true;
+      } else if (changed) {
         if (docs.handles["handles"].empty()) {
           d.reset();  // nothing holds the shape: back to rest
           applied_key.clear();
@@ -342,7 +418,8 @@ void EditSession::workerLoop() {
         }
         applied_version = version;
       }
-      if (d && !stop_now) {
+      if (solver_ == EditSolver::Surface) {
+      } else if (d && !stop_now) {
         fr.e_nonrigid = d->iterate();
         fr.iteration = ++iterations_;
         if (s->from_tets || !s->decimated) {
@@ -364,13 +441,17 @@ void EditSession::workerLoop() {
       fr.error = e.what();
       stop_now = true;
       d.reset();
+      lap.reset();
       applied_key.clear();
     }
     fr.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     {
       std::lock_guard<std::mutex> lk(m_);
       if (fr.surface.rows() > 0) surface_ = fr.surface;
-      pending_ = stop_now ? 0 : std::max(0, pending_ - 1);
+      // stop (converged, one surface solve done, an error) only if no edit came in meanwhile:
+      // an edit made while this iteration ran still gets its iterations
+      if (version_ != version) pending_ = std::max(pending_ - 1, 1);
+      else pending_ = stop_now ? 0 : std::max(0, pending_ - 1);
       working_ = false;
     }
     idle_cv_.notify_all();
@@ -393,6 +474,18 @@ TriMesh EditSession::replay(int iterations) const {
   const auto& s = setup();
   TriMesh out = s.surface;
   if (docs_.handles["handles"].empty()) return out;
+  if (solver_ == EditSolver::Surface) {  // the steps of `tbsp deform` (plugins/cli/deform_cmds.cpp)
+    const DeformJob job = parse_constraints_json(constraintsDoc(), s.surface, "constraints");
+    LaplacianDeformer lap;
+    if (job.weights) lap.setLaplacianWeights(*job.weights);
+    lap.setMesh(s.surface);
+    for (const auto& c : job.constraints) lap.addConstraint(c);
+    lap.setUseRotationField(job.rotation_field.value_or(false));
+    lap.setScale(job.scale);
+    out.V = lap.deform();
+    out.N.resize(0, 3);
+    return out;
+  }
   // the steps of `tbsp tetdeform` (plugins/cli/tet_cmds.cpp), in the same order
   const TetJob job = parseDocs(docs_);
   TetDeformer d;
@@ -408,7 +501,7 @@ TriMesh EditSession::replay(int iterations) const {
 }
 
 void EditSession::save(const std::string& mesh_path, const std::string& handles_path, const std::string& rigid_path,
-                       const std::string& stiffness_path, int iterations) const {
+                       const std::string& stiffness_path, int iterations, const std::string& constraints_path) const {
   if (docs_.handles["handles"].empty()) throw InvalidInput("nothing to save: the edit has no handle yet");
   const TriMesh out = replay(iterations);
   nlohmann::json h = docs_.handles;
@@ -417,6 +510,8 @@ void EditSession::save(const std::string& mesh_path, const std::string& handles_
   if (!rigid_path.empty() && !docs_.rigid.is_null()) write_text_file_atomic(rigid_path, docs_.rigid.dump(2) + "\n");
   if (!stiffness_path.empty() && !docs_.stiffness.is_null())
     write_text_file_atomic(stiffness_path, docs_.stiffness.dump(2) + "\n");
+  if (!constraints_path.empty() && solver_ == EditSolver::Surface)
+    write_text_file_atomic(constraints_path, constraintsDoc().dump(2) + "\n");
   write_mesh(mesh_path, out);
 }
 

@@ -32,6 +32,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "tbsp/deform/laplacian_deformer.h"
 #include "tbsp/deform/tet_deformer.h"
 #include "tbsp/plugins/tet_job_run.h"
 
@@ -47,6 +48,12 @@ struct EditFrame {
   std::string error;          ///< non-empty: the deformer refused the documents (e.g. a free component)
 };
 
+/// Which deformer the session drives.
+enum class EditSolver {
+  Tet,      ///< TetDeformer (ch. 7): volumetric, iterative; rigid regions and stiffness
+  Surface   ///< LaplacianDeformer (ch. 3): the surface alone, one solve per change; rotation field on/off
+};
+
 class EditSession {
 public:
   using FrameCallback = std::function<void(const EditFrame&)>;
@@ -59,7 +66,8 @@ public:
   /// `target_tets` tets; 0 = full resolution) or a `.mesh` tet mesh. Clears the documents and
   /// the undo history. Blocking. \throws InvalidInput / FileError naming the file and the reason
   /// (open, non-manifold or self-intersecting surfaces cannot be edited volumetrically).
-  void open(const std::string& path, long target_tets);
+  void open(const std::string& path, long target_tets, EditSolver solver = EditSolver::Tet);
+  EditSolver solver() const { return solver_; }
   bool isOpen() const { return bool(setup_); }
   const std::string& path() const { return path_; }
   long targetTets() const { return target_tets_; }
@@ -86,6 +94,13 @@ public:
   /// Stiffness `s` > 0 for the tets of `region` (later regions override earlier ones).
   void addStiffness(const nlohmann::json& region, double s);
   void setRotationInterpolation(bool on);
+  /// Surface solver: the rotation field of §3.2.3 (handle rotations interpolated over the
+  /// surface) on or off. Default off. Undoable.
+  void setRotationField(bool on);
+  bool rotationField() const { return docs_.rotation_field; }
+  /// Surface solver: the documents as a `tbsp deform --constraints` file (each handle a hard
+  /// vertex group with its 4x4 transform; docs/constraints_json.md).
+  nlohmann::json constraintsDoc() const;
 
   /// Bumped by every change of the documents (edits, undo, redo, open): lets a view cache what
   /// it derives from them.
@@ -122,13 +137,17 @@ public:
   /// \brief Writes replay(iterations) to `mesh_path` and the documents to the JSON paths
   /// (`rigid_path` / `stiffness_path` only when non-empty; the handles file records
   /// `iterations`). All files are written atomically. \throws FileError.
+  /// Surface solver: `constraints_path` (when non-empty) gets constraintsDoc(), and the mesh is
+  /// what `tbsp deform --mesh IN --constraints C.json` computes.
   void save(const std::string& mesh_path, const std::string& handles_path, const std::string& rigid_path,
-            const std::string& stiffness_path, int iterations) const;
+            const std::string& stiffness_path, int iterations, const std::string& constraints_path = "") const;
 
 private:
   struct Docs {
     nlohmann::json handles, rigid, stiffness;
+    bool rotation_field = false;  // surface solver
   };
+  nlohmann::json constraintsDocOf(const Docs& d) const;
   TetJob parseDocs(const Docs& d) const;  // the CLI's parser, file names "handles" / "rigid" / "stiffness"
   void edit(const std::function<void(Docs&)>& change, bool undoable = true);  // validates, pushes undo
   void workerLoop();
@@ -137,6 +156,7 @@ private:
   std::unique_ptr<TetJobSetup> setup_;
   std::string path_;
   long target_tets_ = 0;
+  EditSolver solver_ = EditSolver::Tet;
   Docs docs_;
   std::vector<Docs> undo_, redo_;
 

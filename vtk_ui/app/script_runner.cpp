@@ -14,7 +14,7 @@ namespace {
 
 const std::set<std::string> kActions = {"open", "edit", "select", "add_handle", "add_rigid", "add_stiffness", "drag", "iterate",
                                         "wait", "undo", "redo", "frame", "camera", "screenshot", "app_screenshot", "save",
-                                        "report", "reset_measurements", "iterations_per_change"};
+                                        "report", "reset_measurements", "iterations_per_change", "rotation_field"};
 
 Eigen::Vector3d vec3(const nlohmann::json& j, const std::string& where) {
   if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() || !j[2].is_number())
@@ -70,6 +70,9 @@ nlohmann::json load_script(const std::string& path) {
         throw FileError(where + " (\"drag\"): " + e.what());
       }
     }
+    if (k == "rotation_field") need(v.is_boolean(), "expected true or false");
+    if (k == "edit" && v.is_object() && v.contains("solver"))
+      need(v["solver"] == "tet" || v["solver"] == "surface", "solver: \"tet\" (TetDeformer) or \"surface\" (LaplacianDeformer)");
     if (k == "save") need(v.is_object() && v.contains("mesh") && v.contains("handles"),
                           "expected {\"mesh\": PATH, \"handles\": PATH, \"iterations\": K}");
     if (k == "add_stiffness") need(v.is_object() && v.contains("stiffness") && v["stiffness"].is_number(),
@@ -126,7 +129,8 @@ bool ScriptRunner::run(const nlohmann::json& a) {
   else if (k == "edit") {
     const std::string mesh = v.is_string() ? v.get<std::string>() : v["mesh"].get<std::string>();
     const long tets = v.is_object() && v.contains("tets") ? v["tets"].get<long>() : 5000;
-    w_.openForEditing(QString::fromStdString(mesh), tets);
+    const bool surface = v.is_object() && v.value("solver", "tet") == "surface";
+    w_.openForEditing(QString::fromStdString(mesh), tets, surface ? EditSolver::Surface : EditSolver::Tet);
   } else if (k == "select") {
     const auto& r = v["rect"];
     w_.selectRect(r[0].get<int>(), r[1].get<int>(), r[2].get<int>(), r[3].get<int>());
@@ -157,10 +161,12 @@ bool ScriptRunner::run(const nlohmann::json& a) {
   else if (k == "save") {
     w_.session().waitIdle();
     w_.save(QString::fromStdString(v["mesh"].get<std::string>()), QString::fromStdString(v["handles"].get<std::string>()),
-            QString::fromStdString(v.value("rigid", "")), QString::fromStdString(v.value("stiffness", "")), v.value("iterations", 50));
+            QString::fromStdString(v.value("rigid", "")), QString::fromStdString(v.value("stiffness", "")), v.value("iterations", 50),
+            QString::fromStdString(v.value("constraints", "")));
   } else if (k == "report") writeReport(v.get<std::string>());
   else if (k == "reset_measurements") w_.resetMeasurements();
   else if (k == "iterations_per_change") w_.setIterationsPerChange(v.get<int>());
+  else if (k == "rotation_field") w_.setRotationField(v.get<bool>());
   return true;
 }
 

@@ -19,11 +19,11 @@
 
 namespace tbsp::studio {
 
-bool StudioWindow::openForEditing(const QString& path, long tets) {
+bool StudioWindow::openForEditing(const QString& path, long tets, EditSolver solver) {
   try {
-    status("tetrahedralizing " + path + " ...");
+    status((solver == EditSolver::Tet ? "tetrahedralizing " : "opening ") + path + " ...");
     QApplication::processEvents();
-    session_.open(path.toStdString(), tets);
+    session_.open(path.toStdString(), tets, solver);
     editing_ = true;
     scene_ = Scene{};
     scene_.path.clear();
@@ -34,8 +34,12 @@ bool StudioWindow::openForEditing(const QString& path, long tets) {
     viz_->resetCamera();
     viz_->render();
     const auto& s = session_.setup();
-    status(QString("editing %1: %2 vertices, %3 tets. S: select, H: handle, G: drag, R: rigid, K: stiffness")
-               .arg(path).arg(s.surface.V.rows()).arg(s.tets.T.rows()));
+    if (solver == EditSolver::Tet)
+      status(QString("editing %1: %2 vertices, %3 tets. S: select, H: handle, G: drag, R: rigid, K: stiffness")
+                 .arg(path).arg(s.surface.V.rows()).arg(s.tets.T.rows()));
+    else
+      status(QString("surface editing %1: %2 vertices (Laplacian). S: select, H: handle, G: drag, T: rotation field")
+                 .arg(path).arg(s.surface.V.rows()));
     return true;
   } catch (const std::exception& e) {
     showError(QString::fromStdString(e.what()));
@@ -108,6 +112,19 @@ bool StudioWindow::addStiffness(const nlohmann::json& region, double stiffness) 
   }
 }
 
+bool StudioWindow::setRotationField(bool on) {
+  try {
+    if (session_.solver() != EditSolver::Surface)
+      throw InvalidInput("the rotation field belongs to the surface solver (File > Open for surface editing)");
+    session_.setRotationField(on);
+    requestSolve();
+    return true;
+  } catch (const std::exception& e) {
+    showError(QString::fromStdString(e.what()));
+    return false;
+  }
+}
+
 bool StudioWindow::dragHandle(int i, const Eigen::Vector3d& t, const Eigen::Vector3d& axis, double degrees,
                               const Eigen::Vector3d& c, bool undoable) {
   try {
@@ -133,11 +150,12 @@ void StudioWindow::redo() {
 }
 
 bool StudioWindow::save(const QString& mesh, const QString& handles, const QString& rigid, const QString& stiffness,
-                        int iterations) {
+                        int iterations, const QString& constraints) {
   try {
     status("saving: replaying the edit from the rest shape ...");
     QApplication::processEvents();
-    session_.save(mesh.toStdString(), handles.toStdString(), rigid.toStdString(), stiffness.toStdString(), iterations);
+    session_.save(mesh.toStdString(), handles.toStdString(), rigid.toStdString(), stiffness.toStdString(), iterations,
+                  constraints.toStdString());
     status("saved " + mesh + " and " + handles + " (replay: tbsp tetdeform --mesh " +
            QString::fromStdString(session_.path()) + " --tets " + QString::number(session_.targetTets()) + " --handles " +
            handles + ")");

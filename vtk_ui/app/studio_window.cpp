@@ -146,6 +146,10 @@ void StudioWindow::buildMenus() {
   auto* file = menuBar()->addMenu("&File");
   file->addAction("&Open...", this, &StudioWindow::onOpen, QKeySequence::Open);
   file->addAction("Open for &editing...", this, &StudioWindow::onOpenForEditing, QKeySequence("Ctrl+E"));
+  file->addAction("Open for s&urface editing (Laplacian)...", this, [this] {
+    const QString p = QFileDialog::getOpenFileName(this, "Open for surface editing", QString(), "meshes (*.ply *.obj *.off *.vtk *.stl)");
+    if (!p.isEmpty()) openForEditing(p, 0, EditSolver::Surface);
+  });
   file->addAction("&Save edit...", this, &StudioWindow::onSave, QKeySequence::Save);
   file->addAction("Screens&hot...", this, [this] {
     const QString p = QFileDialog::getSaveFileName(this, "Screenshot", "screenshot.png", "PNG (*.png)");
@@ -178,6 +182,10 @@ void StudioWindow::buildMenus() {
     const int h = QInputDialog::getInt(this, "Drag handle", "handle", n - 1, 0, n - 1, 1, &ok);
     if (ok) placeGizmo(h);
   }, QKeySequence("G"));
+  auto* rf = edit->addAction("Rotation field (surface editing)");
+  rf->setCheckable(true);
+  rf->setShortcut(QKeySequence("T"));
+  connect(rf, &QAction::toggled, this, [this](bool on) { setRotationField(on); });
   auto* view = menuBar()->addMenu("&View");
   view->addAction("&Reset camera", this, [this] {
     viz_->resetCamera();
@@ -296,7 +304,8 @@ void StudioWindow::onSave() {
   const QString mesh = QFileDialog::getSaveFileName(this, "Save deformed mesh", "edited.ply", "meshes (*.ply *.obj *.off *.vtk)");
   if (mesh.isEmpty()) return;
   const QString base = mesh.left(mesh.lastIndexOf('.'));
-  save(mesh, base + "_handles.json", base + "_rigid.json", base + "_stiffness.json", std::max(50, session_.iterations()));
+  save(mesh, base + "_handles.json", base + "_rigid.json", base + "_stiffness.json", std::max(50, session_.iterations()),
+       base + "_constraints.json");
 }
 
 }  // namespace tbsp::studio

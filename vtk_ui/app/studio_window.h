@@ -54,7 +54,9 @@ public:
 
   // --- editing (ch. 8) -------------------------------------------------------------------
   /// Opens a closed surface (or .mesh) for volumetric editing with about `tets` tets (0: full).
-  bool openForEditing(const QString& path, long tets);
+  bool openForEditing(const QString& path, long tets, EditSolver solver = EditSolver::Tet);
+  /// Surface solver: the rotation field on / off (undoable).
+  bool setRotationField(bool on);
   EditSession& session() { return session_; }
   /// Rubber-band selection of the edited surface's visible vertices in a rectangle of the 3D
   /// view (pixels, origin top-left). \returns how many were selected.
@@ -75,7 +77,8 @@ public:
   /// Iterations the solver runs after each change (default 200; it stops early when converged).
   void setIterationsPerChange(int n) { iterations_per_change_ = n; }
   /// Writes the replayed edit (see EditSession::save); false + message on failure.
-  bool save(const QString& mesh, const QString& handles, const QString& rigid, const QString& stiffness, int iterations);
+  bool save(const QString& mesh, const QString& handles, const QString& rigid, const QString& stiffness, int iterations,
+            const QString& constraints = QString());
 
   // --- measurements ----------------------------------------------------------------------
   LatencyStats latency() const;
