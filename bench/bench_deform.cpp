@@ -5,6 +5,11 @@
 
 #include "bench_main.h"
 
+#define CGAL_EIGEN3_ENABLED 1
+#include <CGAL/Simple_cartesian.h>
+#include <CGAL/Surface_mesh.h>
+#include <CGAL/Surface_mesh_deformation.h>
+
 #include <Eigen/Geometry>
 
 #include <chrono>
@@ -23,9 +28,11 @@ using namespace tbsp;
 
 namespace {
 // arg 4..7: icospheres of 2,562 / 10,242 / 40,962 / 163,842 vertices; 100: a 317 x 317 grid
-// (100,489 vertices); 50: the Stanford Armadillo (49,990 vertices, ../shared/data)
+// (100,489 vertices); 200: a 447 x 447 grid (199,809 vertices); 50: the Stanford Armadillo
+// (49,990 vertices, ../shared/data)
 TriMesh mesh_for(int arg) {
   if (arg == 100) return make_grid(317, 317);
+  if (arg == 200) return make_grid(447, 447);
   if (arg == 50) {
     const std::string p = std::string(TBSP_SHARED_DATA_DIR) + "/meshes/keeganl__linear-subspace-deformation/armadillo.off";
     if (std::filesystem::exists(p)) return read_mesh(p);
@@ -67,7 +74,39 @@ static void BM_DeformResolveMovedTargets(benchmark::State& st) {
   }
   st.counters["vertices"] = double(m.V.rows());
 }
-BENCHMARK(BM_DeformResolveMovedTargets)->DenseRange(4, 6)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_DeformResolveMovedTargets)->DenseRange(4, 6)->Arg(50)->Arg(100)->Arg(200)->Unit(benchmark::kMillisecond);
+
+// The peer of an interactive re-solve: one iteration of CGAL's Surface_mesh_deformation (ARAP,
+// its own prefactored solver) on the same mesh with the same control vertices, one of them moved.
+static void BM_CgalArapIteration(benchmark::State& st) {
+  using K = CGAL::Simple_cartesian<double>;
+  using SM = CGAL::Surface_mesh<K::Point_3>;
+  using VD = boost::graph_traits<SM>::vertex_descriptor;
+  const TriMesh m = mesh_for(int(st.range(0)));
+  SM sm;
+  std::vector<VD> vd;
+  for (Eigen::Index i = 0; i < m.V.rows(); ++i) vd.push_back(sm.add_vertex(K::Point_3(m.V(i, 0), m.V(i, 1), m.V(i, 2))));
+  for (Eigen::Index f = 0; f < m.F.rows(); ++f) sm.add_face(vd[std::size_t(m.F(f, 0))], vd[std::size_t(m.F(f, 1))], vd[std::size_t(m.F(f, 2))]);
+  CGAL::Surface_mesh_deformation<SM> def(sm);
+  def.insert_roi_vertices(sm.vertices().begin(), sm.vertices().end());
+  std::vector<Eigen::Index> controls;
+  for (Eigen::Index v = 0; v < m.V.rows(); v += m.V.rows() / 50) {  // the handles of add_handles()
+    def.insert_control_vertex(vd[std::size_t(v)]);
+    controls.push_back(v);
+  }
+  if (!def.preprocess()) {
+    st.SkipWithError("CGAL preprocess failed");
+    return;
+  }
+  double s = 0;
+  for (auto _ : st) {
+    def.set_target_position(vd[0], K::Point_3(m.V(0, 0) + s, m.V(0, 1), m.V(0, 2)));
+    s += 1e-3;
+    def.deform(1, 0.0);
+  }
+  st.counters["vertices"] = double(m.V.rows());
+}
+BENCHMARK(BM_CgalArapIteration)->DenseRange(4, 6)->Arg(50)->Arg(100)->Arg(200)->Unit(benchmark::kMillisecond);
 
 static void BM_DeformRotationField(benchmark::State& st) {
   const TriMesh m = mesh_for(int(st.range(0)));
@@ -139,8 +178,8 @@ static void BM_CholeskySolve3(benchmark::State& st, bool cholmod_solve) {
   st.counters["vertices"] = double(m.V.rows());
   st.counters["factor_MB"] = 8e-6 * double(s.factorNonZeros());
 }
-BENCHMARK_CAPTURE(BM_CholeskySolve3, tbsp, false)->DenseRange(4, 6)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(BM_CholeskySolve3, cholmod, true)->DenseRange(4, 6)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_CholeskySolve3, tbsp, false)->DenseRange(4, 6)->Arg(50)->Arg(100)->Arg(200)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_CholeskySolve3, cholmod, true)->DenseRange(4, 6)->Arg(50)->Arg(100)->Arg(200)->Unit(benchmark::kMillisecond);
 
 // The memory floor of a solve: streaming as many doubles as the factor stores, twice (forward
 // and backward), on 1 or 2 threads; what BM_CholeskySolve3/tbsp costs above it is arithmetic
@@ -163,7 +202,7 @@ static void BM_StreamFactorTwice(benchmark::State& st) {
   st.counters["vertices"] = double(m.V.rows());
   st.counters["factor_MB"] = 8e-6 * double(values.size());
 }
-BENCHMARK(BM_StreamFactorTwice)->ArgsProduct({{6, 50, 100}, {1, 2}})->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_StreamFactorTwice)->ArgsProduct({{4, 6, 50, 100, 200}, {1, 2}})->Unit(benchmark::kMillisecond);
 
 // The deformation survey's 40k-vertex `plane` (Botsch & Sorkine 2008; ../shared/data,
 // EmperorJack__ShapeDeformer): a fixed region (1,809 vertices) and a handle region (1,608)
