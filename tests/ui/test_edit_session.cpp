@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <fstream>
 
 #include "edit_session.h"
 #include "tbsp/core/error.h"
@@ -55,6 +56,29 @@ TEST(EditSession, DocumentsUndoRedoAndWarmIterationsConvergeToTheReplay) {
   const auto dir = temp_dir("edit_session");
   EXPECT_THROW(s.save((dir / "m.ply").string(), (dir / "h.json").string(), "", "", 10), tbsp::InvalidInput);
   EXPECT_FALSE(std::filesystem::exists(dir / "m.ply"));
+  // a saved handles file loads back into a session (what the CLI reads, the app reads too)
+  {
+    s.redo();
+    s.redo();
+    s.redo();
+    s.save((dir / "m.ply").string(), (dir / "h.json").string(), "", "", 60);
+    tbsp::studio::EditSession again;
+    again.open(sample("bumpy_bar.off"), 0);
+    again.loadHandles((dir / "h.json").string());
+    EXPECT_EQ(again.numHandles(), 2);
+    EXPECT_LT((again.replay(60).V - tbsp::read_mesh((dir / "m.ply").string()).V).cwiseAbs().maxCoeff(), 1e-12);
+    std::ofstream(dir / "bad.json") << R"({"handles": [{"vertices": [3, 100000]}]})";
+    try {
+      again.loadHandles((dir / "bad.json").string());
+      ADD_FAILURE() << "expected FileError";
+    } catch (const tbsp::InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("bad.json: handles[0].vertices[1]"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(again.numHandles(), 2) << "a refused file changes nothing";
+    s.undo();
+    s.undo();
+    s.undo();
+  }
   // a handle added to a deformed shape holds it where it is
   s.redo();
   s.redo();

@@ -180,11 +180,17 @@ TEST(StudioApp, BadInputShowsAMessageAndKeepsTheSession) {
   const auto dir = temp_dir("studio_bad");
   write(dir / "garbage.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n");
   tbsp::write_mesh((dir / "open.off").string(), tbsp::make_grid(4, 4));  // not closed: cannot be edited
+  // two closed tetrahedra sharing one vertex: closed but not a manifold
+  write(dir / "bowtie.off", "OFF\n7 8 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n-1 0 0\n0 -1 0\n0 0 2\n"
+                             "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n3 4 5 0\n3 4 0 6\n3 4 6 5\n3 0 5 6\n");
+  write(dir / "bad_handles.json", R"({"handles": [{"vertices": [1, 99999]}]})");
   write(dir / "script.json", R"({"actions": [
     {"open": "missing.ply"},
     {"open": "garbage.ply"},
     {"edit": {"mesh": "open.off", "tets": 0}},
+    {"edit": {"mesh": "bowtie.off", "tets": 0}},
     {"edit": {"mesh": ")" + sample("bumpy_bar.off") + R"(", "tets": 0}},
+    {"load_handles": "bad_handles.json"},
     {"add_handle": {"vertices": [0, 999999]}},
     {"add_handle": {"sphere": {"center": [50, 50, 50], "radius": 0.01}}},
     {"add_handle": {"box": {"min": [-1, -1, -1], "max": [0.05, 1, 1]}}},
@@ -199,6 +205,8 @@ TEST(StudioApp, BadInputShowsAMessageAndKeepsTheSession) {
   EXPECT_NE(r.err.find("missing.ply"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("garbage.ply"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("open.off"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("bowtie.off"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("bad_handles.json: handles[0].vertices[1]"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("999999"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("selects no vertex"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("no_such_dir"), std::string::npos) << r.err;

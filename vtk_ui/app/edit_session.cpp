@@ -147,7 +147,7 @@ int EditSession::addHandle(const nlohmann::json& region) {
   const auto& s = setup();
   // which tet vertices the region takes: refuse an empty one before it becomes a document
   TetJob probe;
-  parse_tet_handles({{"handles", {region}}}, s.numInputVertices(), "region", probe);
+  parse_tet_handles({{"handles", {region}}}, s.numInputVertices(), "new handle", probe);
   const auto vs = resolve_region_vertices(probe.handles[0].region, s.tets.V, s.to_input, s.dist, s.snap);
   if (vs.empty())
     throw InvalidInput("the region selects no vertex of the tet mesh (" + std::to_string(s.tets.V.rows()) +
@@ -219,7 +219,7 @@ void EditSession::addRigid(const nlohmann::json& region) {
   if (solver_ == EditSolver::Surface)
     throw InvalidInput("rigid regions belong to the tet solver: open the mesh for volumetric editing to use them");
   TetJob probe;
-  parse_tet_rigid({{"rigid", {region}}}, s.numInputVertices(), "region", probe);
+  parse_tet_rigid({{"rigid", {region}}}, s.numInputVertices(), "new rigid region", probe);
   if (resolve_region_tets(probe.rigid[0], s.tets, s.to_input, s.dist, s.snap).empty())
     throw InvalidInput("the rigid region contains no tetrahedron: select a larger region");
   edit([&](Docs& d) {
@@ -242,6 +242,27 @@ void EditSession::addStiffness(const nlohmann::json& region, double st) {
 
 void EditSession::setRotationInterpolation(bool on) {
   edit([&](Docs& d) { d.handles["rotation_interpolation"] = on; });
+}
+
+void EditSession::loadHandles(const std::string& handles_path, const std::string& rigid_path, const std::string& stiffness_path) {
+  const auto& s = setup();
+  // the CLI's reader and parser, with the real file names in the messages
+  const TetJobFiles f = TetJobFiles::load(handles_path, rigid_path, stiffness_path);
+  const TetJob job = f.parse(s.numInputVertices());
+  if (solver_ == EditSolver::Surface && (!job.rigid.empty() || !job.stiffness.empty()))
+    throw InvalidInput(handles_path + ": rigid regions and stiffness belong to the tet solver (surface editing is open)");
+  for (const auto& h : job.handles) {
+    if (h.kind != TetHandleSpec::Region)
+      throw FileError(handles_path + ": " + h.where + ": tbsp-studio edits region handles (vertices, sphere, box); "
+                      "vertex and point handles are for tbsp tetdeform");
+    if (resolve_region_vertices(h.region, s.tets.V, s.to_input, s.dist, s.snap).empty())
+      throw FileError(handles_path + ": " + h.where + ": the region selects no vertex of the mesh; enlarge it");
+  }
+  edit([&](Docs& d) {
+    d.handles = f.handles_doc;
+    d.rigid = rigid_path.empty() ? nlohmann::json() : f.rigid_doc;
+    d.stiffness = stiffness_path.empty() ? nlohmann::json() : f.stiffness_doc;
+  });
 }
 
 void EditSession::setRotationField(bool on) {

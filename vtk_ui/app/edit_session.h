@@ -106,6 +106,12 @@ public:
   /// it derives from them.
   long version() const { return version_; }
 
+  /// \brief Replaces the edit by a handles file of `tbsp tetdeform` (and, when the paths are
+  /// non-empty, its rigid-region and stiffness files), validated against the open mesh by the
+  /// CLI's parser. Undoable. \throws FileError naming the file and the item
+  /// ("H.json: handles[0].vertices[1]: vertex 99999 does not exist ..."); nothing changes then.
+  void loadHandles(const std::string& handles_path, const std::string& rigid_path = "", const std::string& stiffness_path = "");
+
   bool undo();  ///< \returns false when there is nothing to undo
   bool redo();
   const nlohmann::json& handlesDoc() const { return docs_.handles; }

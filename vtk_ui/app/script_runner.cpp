@@ -14,7 +14,7 @@ namespace {
 
 const std::set<std::string> kActions = {"open", "edit", "select", "add_handle", "add_rigid", "add_stiffness", "drag", "iterate",
                                         "wait", "undo", "redo", "frame", "camera", "screenshot", "app_screenshot", "save",
-                                        "report", "reset_measurements", "iterations_per_change", "rotation_field"};
+                                        "report", "reset_measurements", "iterations_per_change", "rotation_field", "load_handles"};
 
 Eigen::Vector3d vec3(const nlohmann::json& j, const std::string& where) {
   if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() || !j[2].is_number())
@@ -71,6 +71,8 @@ nlohmann::json load_script(const std::string& path) {
       }
     }
     if (k == "rotation_field") need(v.is_boolean(), "expected true or false");
+    if (k == "load_handles") need(v.is_string() || (v.is_object() && v.contains("handles")),
+                                  "expected a path or {\"handles\": PATH, \"rigid\": PATH, \"stiffness\": PATH}");
     if (k == "edit" && v.is_object() && v.contains("solver"))
       need(v["solver"] == "tet" || v["solver"] == "surface", "solver: \"tet\" (TetDeformer) or \"surface\" (LaplacianDeformer)");
     if (k == "save") need(v.is_object() && v.contains("mesh") && v.contains("handles"),
@@ -167,6 +169,11 @@ bool ScriptRunner::run(const nlohmann::json& a) {
   else if (k == "reset_measurements") w_.resetMeasurements();
   else if (k == "iterations_per_change") w_.setIterationsPerChange(v.get<int>());
   else if (k == "rotation_field") w_.setRotationField(v.get<bool>());
+  else if (k == "load_handles") {
+    if (v.is_string()) w_.loadHandles(QString::fromStdString(v.get<std::string>()));
+    else w_.loadHandles(QString::fromStdString(v["handles"].get<std::string>()), QString::fromStdString(v.value("rigid", "")),
+                        QString::fromStdString(v.value("stiffness", "")));
+  }
   return true;
 }
 

@@ -90,6 +90,20 @@ bool StudioWindow::addHandle(const nlohmann::json& region) {
   }
 }
 
+bool StudioWindow::loadHandles(const QString& handles, const QString& rigid, const QString& stiffness) {
+  try {
+    session_.loadHandles(handles.toStdString(), rigid.toStdString(), stiffness.toStdString());
+    updateHandleGlyphs();
+    if (session_.numHandles() > 0) placeGizmo(session_.numHandles() - 1);
+    requestSolve();
+    status("loaded " + handles);
+    return true;
+  } catch (const std::exception& e) {
+    showError(QString::fromStdString(e.what()));
+    return false;
+  }
+}
+
 bool StudioWindow::addRigid(const nlohmann::json& region) {
   try {
     session_.addRigid(region);

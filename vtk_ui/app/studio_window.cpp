@@ -150,6 +150,10 @@ void StudioWindow::buildMenus() {
     const QString p = QFileDialog::getOpenFileName(this, "Open for surface editing", QString(), "meshes (*.ply *.obj *.off *.vtk *.stl)");
     if (!p.isEmpty()) openForEditing(p, 0, EditSolver::Surface);
   });
+  file->addAction("&Load handles...", this, [this] {
+    const QString p = QFileDialog::getOpenFileName(this, "Load a tbsp tetdeform handles file", QString(), "JSON (*.json)");
+    if (!p.isEmpty()) loadHandles(p);
+  });
   file->addAction("&Save edit...", this, &StudioWindow::onSave, QKeySequence::Save);
   file->addAction("Screens&hot...", this, [this] {
     const QString p = QFileDialog::getSaveFileName(this, "Screenshot", "screenshot.png", "PNG (*.png)");

@@ -67,6 +67,8 @@ public:
   /// Adds a handle / rigid region / stiffness for `region`; on failure shows the message and
   /// returns false (the edit is unchanged).
   bool addHandle(const nlohmann::json& region);
+  /// Loads a `tbsp tetdeform` handles file (+ optional rigid / stiffness files) into the edit.
+  bool loadHandles(const QString& handles, const QString& rigid = QString(), const QString& stiffness = QString());
   bool addRigid(const nlohmann::json& region);
   bool addStiffness(const nlohmann::json& region, double stiffness);
   /// Moves handle `i` (motion relative to the rest shape) and lets the solver iterate.
