@@ -135,6 +135,7 @@ int cmd_texture(const TextureArgs& a) {
   if (!a.report.empty()) {
     nlohmann::json j;
     j["mesh"] = a.mesh;
+    j["output"] = a.out;
     j["image"] = {{"path", a.image}, {"width", img.cols}, {"height", img.rows}};
     j["constraints"] = p.constraints;
     j["vertices"] = p.mesh_vertices;

@@ -316,3 +316,60 @@ TEST(StudioApp, SurfaceEditingWithAndWithoutTheRotationFieldEqualsTbspDeform) {
   // and the view showed the dragged shape (not the rest shape) when the first screenshot was taken
   EXPECT_LT(foreground(cv::imread((dir / "off.png").string())).cy, 290);
 }
+
+TEST(StudioApp, TetdeformAndTextureReportsOpenAsDisplacementMapAndTexturedMesh) {
+  const auto dir = temp_dir("studio_reports");
+  // a tetdeform run and its report
+  const Proc t = cli("tetdeform --mesh " + sample("bumpy_bar.off") + " --tets 3000 --handles " + sample("bar_twist_tet.json") +
+                         " --iterations 30 --out twisted.ply --report tet.json -q",
+                     dir);
+  ASSERT_EQ(t.rc, 0) << t.err;
+  // a textured OBJ with a red / blue texture as tbsp texture writes it, and its report
+  tbsp::TriMesh m = tbsp::make_icosphere(3);
+  Eigen::MatrixX2d uv(m.V.rows(), 2);
+  for (Eigen::Index i = 0; i < m.V.rows(); ++i) uv.row(i) << (m.V(i, 0) > 0 ? 0.75 : 0.25), 0.5;
+  tbsp::write_textured_obj((dir / "tex.obj").string(), m, uv, (dir / "tex.mtl").string(), "texture", "tex.png");
+  cv::Mat img(64, 64, CV_8UC3, cv::Scalar(255, 0, 0));              // BGR: blue ...
+  img(cv::Rect(32, 0, 32, 64)).setTo(cv::Scalar(0, 0, 255));        // ... left, red right
+  cv::imwrite((dir / "tex.png").string(), img);
+  write(dir / "texture.json", R"({"mesh": "sphere.off", "output": "tex.obj", "image": {"path": "x.png"}, "constraints": 3})");
+  write(dir / "script.json", R"({"actions": [
+    {"open": "tet.json"}, {"screenshot": "tet.png"},
+    {"open": "texture.json"}, {"camera": {"eye": [0, 0, 5], "focal": [0, 0, 0], "up": [0, 1, 0]}}, {"screenshot": "tex.png.png"}
+  ]})");
+  const Proc r = studio("--size 400x300 --script script.json", dir);
+  ASSERT_EQ(r.rc, 0) << r.err;
+  // the twisted bar: displacement heatmap (viridis yellow at the twisted end, purple at the fixed end)
+  const cv::Mat tet = cv::imread((dir / "tet.png").string());
+  int yellow = 0, purple = 0;
+  for (int y = 0; y < tet.rows; ++y)
+    for (int x = 0; x < tet.cols * 8 / 10; ++x) {
+      const cv::Vec3b p = tet.at<cv::Vec3b>(y, x);
+      yellow += p[2] > 170 && p[1] > 160 && p[0] < 110;
+      purple += p[2] > 40 && p[2] < 130 && p[1] < 70 && p[0] > 60;
+    }
+  EXPECT_GT(yellow, 100);
+  EXPECT_GT(purple, 100);
+  // the textured sphere: red on its +x half (right in this view), blue on the left, unlit
+  const cv::Mat tex = cv::imread((dir / "tex.png.png").string());
+  int red_right = 0, blue_left = 0, red_left = 0;
+  for (int y = 0; y < tex.rows; ++y)
+    for (int x = 0; x < tex.cols; ++x) {
+      const cv::Vec3b p = tex.at<cv::Vec3b>(y, x);
+      const bool red = p[2] > 200 && p[1] < 60 && p[0] < 60, blue = p[0] > 200 && p[1] < 60 && p[2] < 60;
+      red_right += red && x > tex.cols / 2;
+      red_left += red && x < tex.cols / 2 - 10;
+      blue_left += blue && x < tex.cols / 2;
+    }
+  EXPECT_GT(red_right, 2000);
+  EXPECT_GT(blue_left, 2000);
+  EXPECT_LT(red_left, 50);
+  // the previous file's colour bar went with it: nothing viridis-yellow is left on the right
+  int bar_yellow = 0;
+  for (int y = 0; y < tex.rows; ++y)
+    for (int x = tex.cols * 8 / 10; x < tex.cols; ++x) {
+      const cv::Vec3b p = tex.at<cv::Vec3b>(y, x);
+      bar_yellow += p[2] > 200 && p[1] > 190 && p[0] < 90;
+    }
+  EXPECT_EQ(bar_yellow, 0);
+}

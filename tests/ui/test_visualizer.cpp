@@ -66,6 +66,9 @@ TEST(Visualizer, PclCloudWithAHeatmapRendersOffscreenInItsColours) {
   viz.setScalars("cloud", value, {"value", tbsp::ColorMap::Viridis, 0.0, 1.0});
   EXPECT_THROW(viz.setScalars("cloud", Eigen::VectorXd::Zero(5), {}), tbsp::InvalidInput);
   EXPECT_THROW(viz.setScalars("nope", value, {}), tbsp::InvalidInput);
+  viz.addSpheres("balls", Eigen::MatrixX3d::Zero(1, 3), 0.1);
+  EXPECT_THROW(viz.setScalars("balls", Eigen::VectorXd::Zero(1), {}), tbsp::InvalidInput) << "spheres have no per-point colours";
+  viz.remove("balls");
   viz.resetCamera();
   const auto dir = temp_dir("viz_cloud");
   const std::string png = (dir / "cloud.png").string();

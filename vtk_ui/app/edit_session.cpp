@@ -311,6 +311,7 @@ bool EditSession::redo() {
 }
 
 void EditSession::setFrameCallback(FrameCallback cb) {
+  std::lock_guard<std::mutex> in_call(callback_m_);  // a callback running now finishes first
   std::lock_guard<std::mutex> lk(m_);
   callback_ = std::move(cb);
 }
@@ -362,7 +363,6 @@ void EditSession::workerLoop() {
     Docs docs;
     long version = 0;
     bool changed = false;
-    FrameCallback cb;
     const TetJobSetup* s = nullptr;
     {
       std::unique_lock<std::mutex> lk(m_);
@@ -372,7 +372,6 @@ void EditSession::workerLoop() {
       version = version_;
       changed = version != applied_version;
       if (changed) docs = worker_docs_;
-      cb = callback_;
       s = setup_.get();
     }
     EditFrame fr;
@@ -476,14 +475,23 @@ void EditSession::workerLoop() {
       working_ = false;
     }
     idle_cv_.notify_all();
-    if (cb && (fr.surface.rows() > 0 || !fr.error.empty())) {
+    if (fr.surface.rows() > 0 || !fr.error.empty()) {
       long out = 0;
+      bool called = false;
       {
-        std::lock_guard<std::mutex> lk(m_);
-        out = ++frames_out_;
+        std::lock_guard<std::mutex> in_call(callback_m_);
+        FrameCallback cb;
+        {
+          std::lock_guard<std::mutex> lk(m_);
+          cb = callback_;
+          if (cb) out = ++frames_out_;
+        }
+        if (cb) {
+          cb(fr);
+          called = true;
+        }
       }
-      cb(fr);
-      if (lockstep_) {
+      if (called && lockstep_) {
         std::unique_lock<std::mutex> lk(m_);
         shown_cv_.wait_for(lk, std::chrono::milliseconds(250), [&] { return stop_ || frames_shown_ >= out; });
       }

@@ -176,6 +176,7 @@ private:
   Docs worker_docs_;                 // copy the worker applies
   Eigen::MatrixX3d surface_;         // last surface
   FrameCallback callback_;
+  std::mutex callback_m_;            // held while the callback runs: setFrameCallback waits for it
   std::atomic<int> iterations_{0};
   std::atomic<bool> lockstep_{true};
   long frames_out_ = 0, frames_shown_ = 0;

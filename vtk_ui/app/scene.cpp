@@ -14,6 +14,14 @@
 #include "tbsp/io/tet_mesh_io.h"
 #include "tbsp/mesh/point_mesh_distance.h"
 
+#include <vtkCellArray.h>
+#include <vtkCellArrayIterator.h>
+#include <vtkDataArray.h>
+#include <vtkOBJReader.h>
+#include <vtkPointData.h>
+#include <vtkPolyData.h>
+#include <vtkSmartPointer.h>
+
 namespace fs = std::filesystem;
 
 namespace tbsp::studio {
@@ -45,16 +53,78 @@ Eigen::MatrixX3d cloud_points(const std::string& path) {
   return P;
 }
 
-void load_fit_report(Visualizer& viz, Scene& s) {
-  nlohmann::json j;
-  try {
-    std::ifstream in(s.path);
-    j = nlohmann::json::parse(in);
-  } catch (const std::exception& e) {
-    throw FileError(s.path + ": not valid JSON (" + e.what() + ")");
+// `tbsp texture --report`: the textured OBJ it names, with its texture (OUT.png next to it).
+void load_texture_report(Visualizer& viz, Scene& s, const nlohmann::json& j) {
+  const std::string obj = resolve_near(j["output"].get<std::string>(), s.path);
+  if (!fs::exists(obj)) throw FileError(s.path + ": the textured mesh " + obj + " it names does not exist");
+  auto reader = vtkSmartPointer<vtkOBJReader>::New();
+  reader->SetFileName(obj.c_str());
+  reader->Update();
+  vtkPolyData* pd = reader->GetOutput();
+  vtkDataArray* tc = pd ? pd->GetPointData()->GetTCoords() : nullptr;
+  if (!pd || pd->GetNumberOfPoints() == 0 || !tc)
+    throw FileError(obj + ": not an OBJ with texture coordinates (written by tbsp texture)");
+  TriMesh m;
+  m.V.resize(pd->GetNumberOfPoints(), 3);
+  Eigen::MatrixX2d uv(pd->GetNumberOfPoints(), 2);
+  for (vtkIdType i = 0; i < pd->GetNumberOfPoints(); ++i) {
+    double p[3];
+    pd->GetPoint(i, p);
+    m.V.row(i) << p[0], p[1], p[2];
+    uv.row(i) << tc->GetComponent(i, 0), tc->GetComponent(i, 1);
   }
-  if (!j.contains("output") || !j["output"].is_string() || !j.contains("input") || !j["input"].contains("cloud"))
-    throw FileError(s.path + ": a fit report needs \"output\" and \"input\".\"cloud\" (written by tbsp fit --report)");
+  std::vector<Eigen::Vector3i> faces;
+  auto it = vtkSmartPointer<vtkCellArrayIterator>::Take(pd->GetPolys()->NewIterator());
+  for (it->GoToFirstCell(); !it->IsDoneWithTraversal(); it->GoToNextCell()) {
+    vtkIdType n;
+    const vtkIdType* ids;
+    it->GetCurrentCell(n, ids);
+    for (vtkIdType k = 1; k + 1 < n; ++k) faces.emplace_back(int(ids[0]), int(ids[k]), int(ids[k + 1]));
+  }
+  m.F.resize(Eigen::Index(faces.size()), 3);
+  for (std::size_t f = 0; f < faces.size(); ++f) m.F.row(Eigen::Index(f)) = faces[f].transpose();
+  const std::string png = fs::path(obj).replace_extension(".png").string();
+  cv::Mat img = cv::imread(png, cv::IMREAD_COLOR);
+  if (img.empty()) throw FileError(png + ": the texture image of " + obj + " cannot be read");
+  cv::cvtColor(img, img, cv::COLOR_BGR2RGB);
+  if (!img.isContinuous()) img = img.clone();
+  viz.addTexturedMesh("mesh", m, uv, std::vector<unsigned char>(img.data, img.data + img.total() * 3), img.cols, img.rows);
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "texture report: %lld vertices, %dx%d texture, constraint residual max %.2f px, matched %.1f %%",
+                static_cast<long long>(m.V.rows()), img.cols, img.rows, j.value("max_constraint_residual_px", 0.0),
+                100.0 * j.value("matched_fraction", 0.0));
+  s.summary = buf;
+}
+
+// `tbsp tetdeform --report`: the deformed output coloured by how far each vertex moved.
+void load_tet_report(Visualizer& viz, Scene& s, const nlohmann::json& j) {
+  const std::string in = resolve_near(j["input"]["mesh"].get<std::string>(), s.path);
+  const std::string out = resolve_near(j["output"].get<std::string>(), s.path);
+  auto surface = [&](const std::string& p) {
+    return p.size() > 5 && p.compare(p.size() - 5, 5, ".mesh") == 0 ? tet_boundary_mesh(read_tet_mesh(p)) : read_mesh(p);
+  };
+  TriMesh rest, def;
+  try {
+    rest = surface(in);
+    def = surface(out);
+  } catch (const std::exception& e) {
+    throw FileError(s.path + ": " + e.what() + " (the report names it; keep the meshes next to the report)");
+  }
+  viz.addMesh("mesh", def);
+  if (rest.V.rows() == def.V.rows()) {
+    viz.addMesh("rest", rest, {0.7, 0.7, 0.7});
+    viz.setOpacity("rest", 0.2);
+    const Eigen::VectorXd d = (def.V - rest.V).rowwise().norm() * (100.0 / bbox_diagonal(rest.V));
+    viz.setScalars("mesh", d, {"moved, % diag", ColorMap::Viridis, 0.0, std::max(d.maxCoeff(), 1e-9)});
+  }
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "tetdeform report: %lld tets, %d iterations%s, volume ratio %.4f",
+                static_cast<long long>(j.value("tet_mesh", nlohmann::json::object()).value("tets", 0LL)),
+                j.value("iterations", 0), j.value("converged", false) ? " (converged)" : "", j.value("volume_ratio", 1.0));
+  s.summary = buf;
+}
+
+void load_fit_report(Visualizer& viz, Scene& s, const nlohmann::json& j) {
   const std::string mesh_path = resolve_near(j["output"].get<std::string>(), s.path);
   const std::string cloud_path = resolve_near(j["input"]["cloud"].get<std::string>(), s.path);
   TriMesh fit;
@@ -90,15 +160,21 @@ void load_fit_report(Visualizer& viz, Scene& s) {
   s.summary = buf;
 }
 
-void load_studio(Visualizer& viz, Scene& s) {
-  s.studio = read_studio(s.path);
-  const auto& cams = s.studio.cameras;
+// How far from its centre a camera's image plane is drawn: a quarter of the rig's radius.
+double image_plane_depth(const Studio& studio) {
+  const auto& cams = studio.cameras;
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (const auto& c : cams) mean += c.camera.center();
   mean /= double(std::max<size_t>(1, cams.size()));
   double spread = 0;
   for (const auto& c : cams) spread = std::max(spread, (c.camera.center() - mean).norm());
-  const double depth = std::max(1e-3, 0.25 * spread);
+  return std::max(1e-3, 0.25 * spread);
+}
+
+void load_studio(Visualizer& viz, Scene& s) {
+  s.studio = read_studio(s.path);
+  const auto& cams = s.studio.cameras;
+  const double depth = image_plane_depth(s.studio);
   for (std::size_t k = 0; k < cams.size(); ++k) viz.addCamera("camera:" + cams[k].camera.name(), cams[k].camera, depth);
   if (!s.studio.template_mesh.empty()) viz.addMesh("mesh", read_mesh(s.studio.resolve(s.studio.template_mesh)));
   s.summary = "studio " + s.studio.name + ": " + std::to_string(cams.size()) + " cameras, frames " +
@@ -156,7 +232,32 @@ Scene load_scene(Visualizer& viz, const std::string& path) {
       s.summary = path + ": " + std::to_string(t.V.rows()) + " vertices, " + std::to_string(t.T.rows()) + " tets";
       break;
     }
-    case FileKind::FitReport: load_fit_report(viz, s); break;
+    case FileKind::TetReport:      // classify() returns FitReport for every .json: the keys decide below
+    case FileKind::TextureReport:
+    case FileKind::FitReport: {  // any report: which one is read from its keys
+      nlohmann::json j;
+      try {
+        std::ifstream in(path);
+        j = nlohmann::json::parse(in);
+      } catch (const std::exception& e) {
+        throw FileError(path + ": not valid JSON (" + e.what() + ")");
+      }
+      const bool has_out = j.is_object() && j.contains("output") && j["output"].is_string();
+      if (has_out && j.contains("input") && j["input"].is_object() && j["input"].contains("cloud")) {
+        load_fit_report(viz, s, j);
+      } else if (has_out && j.contains("input") && j["input"].is_object() && j["input"].contains("mesh") &&
+                 j.contains("e_nonrigid")) {
+        s.kind = FileKind::TetReport;
+        load_tet_report(viz, s, j);
+      } else if (has_out && j.contains("image") && j.contains("constraints")) {
+        s.kind = FileKind::TextureReport;
+        load_texture_report(viz, s, j);
+      } else {
+        throw FileError(path + ": not a report tbsp-studio shows (tbsp fit / tetdeform / texture --report); a handles "
+                        "file is loaded into an edit (File > Open for editing, then File > Load handles)");
+      }
+      break;
+    }
     case FileKind::Studio: load_studio(viz, s); break;
     case FileKind::MeshSequence: {
       for (const auto& e : fs::directory_iterator(path))
@@ -197,16 +298,12 @@ void show_frame(Visualizer& viz, const Scene& s, int index) {
     }
   } else if (s.kind == FileKind::Studio) {
     const auto& cams = s.studio.cameras;
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (const auto& c : cams) mean += c.camera.center();
-    mean /= double(std::max<size_t>(1, cams.size()));
-    double spread = 0;
-    for (const auto& c : cams) spread = std::max(spread, (c.camera.center() - mean).norm());
+    const double depth = image_plane_depth(s.studio);
     for (std::size_t k = 0; k < cams.size(); ++k) {
       int w = 0, h = 0;
       auto rgb = studio_image_rgb(s.studio, int(k), index, &w, &h);
       if (!rgb.empty() && w == cams[k].camera.width() && h == cams[k].camera.height())
-        viz.addCamera("camera:" + cams[k].camera.name(), cams[k].camera, std::max(1e-3, 0.25 * spread), rgb);
+        viz.addCamera("camera:" + cams[k].camera.name(), cams[k].camera, depth, rgb);
     }
     if (!s.studio.ground_truth.empty()) {
       const std::string p = s.studio.groundTruthPath(s.studio.first_frame + index);

@@ -15,7 +15,7 @@
 
 namespace tbsp::studio {
 
-enum class FileKind { Mesh, Cloud, TetMesh, FitReport, Studio, MeshSequence };
+enum class FileKind { Mesh, Cloud, TetMesh, FitReport, TetReport, TextureReport, Studio, MeshSequence };
 
 /// What was opened (and what the timeline plays).
 struct Scene {

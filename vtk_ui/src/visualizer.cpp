@@ -132,6 +132,7 @@ struct Visualizer::Impl {
   SP<vtkScalarBarActor> bar;
   SP<vtkTextActor> text;
   std::map<std::string, Object> objects;
+  std::string bar_owner;                   // the object whose scalars the colour bar shows
   std::vector<std::string> order;
 
   Object& get(const std::string& id, const char* who) {
@@ -150,6 +151,10 @@ struct Visualizer::Impl {
     if (it == objects.end()) return;
     for (auto& p : it->second.props) renderer->RemoveViewProp(p);
     objects.erase(it);
+    if (bar_owner == id) {  // its colour bar goes with it
+      bar->SetVisibility(false);
+      bar_owner.clear();
+    }
     order.erase(std::remove(order.begin(), order.end(), id), order.end());
   }
   void init(const Eigen::Vector3d& bg) {
@@ -159,8 +164,9 @@ struct Visualizer::Impl {
     bar = SP<vtkScalarBarActor>::New();
     bar->SetVisibility(false);
     bar->SetNumberOfLabels(5);
-    bar->SetMaximumWidthInPixels(90);
-    bar->SetPosition(0.84, 0.1);
+    bar->SetMaximumWidthInPixels(80);
+    bar->SetPosition(0.8, 0.1);
+    bar->SetLabelFormat("%-#6.3g");
     bar->SetUnconstrainedFontSize(true);
     bar->SetTextPad(4);
     bar->SetPosition2(0.1, 0.8);
@@ -231,6 +237,43 @@ void Visualizer::addMesh(const std::string& id, const TriMesh& mesh, const Eigen
   actor->GetProperty()->SetSpecular(0.15);
   o.props.push_back(actor);
   impl_->put(id, std::move(o));
+}
+
+namespace {
+SP<vtkTexture> make_texture(const std::vector<unsigned char>& rgb, int w, int h) {
+  auto img = SP<vtkImageData>::New();
+  img->SetDimensions(w, h, 1);
+  img->AllocateScalars(VTK_UNSIGNED_CHAR, 3);
+  auto* dst = static_cast<unsigned char*>(img->GetScalarPointer());
+  const std::size_t row = std::size_t(w) * 3;
+  for (int y = 0; y < h; ++y)  // VTK images start at the bottom row
+    std::copy(rgb.begin() + long(y) * long(row), rgb.begin() + long(y + 1) * long(row), dst + std::size_t(h - 1 - y) * row);
+  auto tex = SP<vtkTexture>::New();
+  tex->SetInputData(img);
+  tex->InterpolateOn();
+  return tex;
+}
+}  // namespace
+
+void Visualizer::addTexturedMesh(const std::string& id, const TriMesh& mesh, const Eigen::MatrixX2d& uv,
+                                 const std::vector<unsigned char>& rgb, int width, int height) {
+  if (uv.rows() != mesh.V.rows())
+    throw InvalidInput("Visualizer::addTexturedMesh: \"" + id + "\": " + std::to_string(uv.rows()) + " texture coordinates for " +
+                       std::to_string(mesh.V.rows()) + " vertices");
+  if (width <= 0 || height <= 0 || rgb.size() != std::size_t(width) * std::size_t(height) * 3)
+    throw InvalidInput("Visualizer::addTexturedMesh: \"" + id + "\": the image has " + std::to_string(rgb.size()) +
+                       " bytes for " + std::to_string(width) + " x " + std::to_string(height) + " RGB pixels");
+  addMesh(id, mesh);
+  auto& o = impl_->get(id, "addTexturedMesh");
+  auto tc = SP<vtkDoubleArray>::New();
+  tc->SetNumberOfComponents(2);
+  tc->SetNumberOfTuples(uv.rows());
+  for (Eigen::Index i = 0; i < uv.rows(); ++i) tc->SetTuple2(i, uv(i, 0), uv(i, 1));
+  o.poly->GetPointData()->SetTCoords(tc);
+  auto* actor = vtkActor::SafeDownCast(o.props[0]);
+  actor->SetTexture(make_texture(rgb, width, height));
+  actor->GetProperty()->SetColor(1, 1, 1);
+  actor->GetProperty()->LightingOff();
 }
 
 void Visualizer::updatePositions(const std::string& id, const Eigen::MatrixX3d& V) {
@@ -342,16 +385,7 @@ void Visualizer::addCamera(const std::string& id, const Camera& cam, double dept
   addLines(id, from, to, color, 1.5);
   if (rgb.empty()) return;
   auto& o = impl_->get(id, "addCamera");
-  auto img = SP<vtkImageData>::New();
-  img->SetDimensions(cam.width(), cam.height(), 1);
-  img->AllocateScalars(VTK_UNSIGNED_CHAR, 3);
-  auto* dst = static_cast<unsigned char*>(img->GetScalarPointer());
-  const size_t row = size_t(cam.width()) * 3;
-  for (int y = 0; y < cam.height(); ++y)  // VTK images start at the bottom row
-    std::copy(rgb.begin() + long(y) * long(row), rgb.begin() + long(y + 1) * long(row), dst + size_t(cam.height() - 1 - y) * row);
-  auto tex = SP<vtkTexture>::New();
-  tex->SetInputData(img);
-  tex->InterpolateOn();
+  const auto tex = make_texture(rgb, cam.width(), cam.height());
   auto plane = SP<vtkPlaneSource>::New();
   plane->SetOrigin(c3.x(), c3.y(), c3.z());   // bottom-left of the image
   plane->SetPoint1(c2.x(), c2.y(), c2.z());   // bottom-right
@@ -368,6 +402,7 @@ void Visualizer::addCamera(const std::string& id, const Camera& cam, double dept
 
 void Visualizer::setScalars(const std::string& id, const Eigen::VectorXd& values, const ScalarBarOptions& bar) {
   auto& o = impl_->get(id, "setScalars");
+  if (!o.mapper) throw InvalidInput("Visualizer::setScalars: object \"" + id + "\" (spheres) has no per-point colours");
   if (o.poly->GetNumberOfPoints() != values.size())
     throw InvalidInput("Visualizer::setScalars: object \"" + id + "\" has " + std::to_string(o.poly->GetNumberOfPoints()) +
                        " vertices/points, got " + std::to_string(values.size()) + " values");
@@ -406,6 +441,7 @@ void Visualizer::setScalars(const std::string& id, const Eigen::VectorXd& values
     impl_->bar->SetLookupTable(lut);
     impl_->bar->SetTitle(bar.title.c_str());
     impl_->bar->SetVisibility(true);
+    impl_->bar_owner = id;
   }
 }
 

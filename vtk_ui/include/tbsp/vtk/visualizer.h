@@ -86,6 +86,12 @@ public:
   /// A triangle mesh, flat grey-blue by default (`rgb` in [0, 1]), smooth-shaded.
   /// \throws InvalidInput for a face index out of range.
   void addMesh(const std::string& id, const TriMesh& mesh, const Eigen::Vector3d& rgb = {0.75, 0.78, 0.85});
+  /// A triangle mesh with a texture: `uv` one texture coordinate per vertex in [0, 1] (origin
+  /// bottom-left, as OBJ), `rgb` the image (row-major 8-bit RGB, top row first, width × height
+  /// × 3 bytes). Unlit, so the image's colours are shown as they are.
+  /// \throws InvalidInput for a wrong uv row count or image size.
+  void addTexturedMesh(const std::string& id, const TriMesh& mesh, const Eigen::MatrixX2d& uv,
+                       const std::vector<unsigned char>& rgb, int width, int height);
   /// Moves the vertices of a mesh, cloud or tet mesh added before (same count; normals
   /// recomputed). O(#V). \throws InvalidInput for an unknown id or a different vertex count.
   void updatePositions(const std::string& id, const Eigen::MatrixX3d& V);
