@@ -251,7 +251,7 @@ TEST(StudioApp, StudioCamerasWithImagesAndASequenceOnTheTimeline) {
     {"open": "studio/studio.yaml"},
     {"frame": 2},
     {"screenshot": "studio.png"},
-    {"open": "studio/gt"},
+    {"add": "studio/gt"},
     {"screenshot": "f0.png"},
     {"frame": 2},
     {"screenshot": "f2.png"}

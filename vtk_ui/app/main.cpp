@@ -18,7 +18,8 @@ int main(int argc, char** argv) {
   std::string screenshot, script, edit, size = "800x600";
   long tets = 5000;
   bool whole = false;
-  cli.add_option("files", files, "files to open: .ply .obj .off .vtk .stl .pcd .mesh, a fit report .json, studio.yaml, a folder of meshes");
+  cli.add_option("files", files, "files to open, shown together: .ply .obj .off .vtk .stl .pcd .mesh, a fit / tetdeform / texture "
+                                 "report .json, studio.yaml, a folder of meshes (a sequence)");
   cli.add_option("--edit", edit, "open this closed surface (or .mesh) for editing");
   cli.add_option("--tets", tets, "target tet count of --edit (0: tetrahedralize at full resolution; default 5000)")
       ->check(CLI::NonNegativeNumber);
@@ -60,7 +61,7 @@ int main(int argc, char** argv) {
   const bool scripted = !screenshot.empty() || !script.empty();
   tbsp::studio::StudioWindow w(W, H, scripted);
   w.show();
-  for (const auto& f : files) w.openFile(QString::fromStdString(f));
+  for (std::size_t i = 0; i < files.size(); ++i) w.openFile(QString::fromStdString(files[i]), /*add=*/i > 0);
   if (!edit.empty()) w.openForEditing(QString::fromStdString(edit), tets);
   std::unique_ptr<tbsp::studio::ScriptRunner> runner;
   if (!script.empty()) {

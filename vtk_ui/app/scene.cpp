@@ -88,7 +88,7 @@ void load_texture_report(Visualizer& viz, Scene& s, const nlohmann::json& j) {
   if (img.empty()) throw FileError(png + ": the texture image of " + obj + " cannot be read");
   cv::cvtColor(img, img, cv::COLOR_BGR2RGB);
   if (!img.isContinuous()) img = img.clone();
-  viz.addTexturedMesh("mesh", m, uv, std::vector<unsigned char>(img.data, img.data + img.total() * 3), img.cols, img.rows);
+  viz.addTexturedMesh(s.prefix + "mesh", m, uv, std::vector<unsigned char>(img.data, img.data + img.total() * 3), img.cols, img.rows);
   char buf[256];
   std::snprintf(buf, sizeof buf, "texture report: %lld vertices, %dx%d texture, constraint residual max %.2f px, matched %.1f %%",
                 static_cast<long long>(m.V.rows()), img.cols, img.rows, j.value("max_constraint_residual_px", 0.0),
@@ -110,12 +110,12 @@ void load_tet_report(Visualizer& viz, Scene& s, const nlohmann::json& j) {
   } catch (const std::exception& e) {
     throw FileError(s.path + ": " + e.what() + " (the report names it; keep the meshes next to the report)");
   }
-  viz.addMesh("mesh", def);
+  viz.addMesh(s.prefix + "mesh", def);
   if (rest.V.rows() == def.V.rows()) {
-    viz.addMesh("rest", rest, {0.7, 0.7, 0.7});
-    viz.setOpacity("rest", 0.2);
+    viz.addMesh(s.prefix + "rest", rest, {0.7, 0.7, 0.7});
+    viz.setOpacity(s.prefix + "rest", 0.2);
     const Eigen::VectorXd d = (def.V - rest.V).rowwise().norm() * (100.0 / bbox_diagonal(rest.V));
-    viz.setScalars("mesh", d, {"moved, % diag", ColorMap::Viridis, 0.0, std::max(d.maxCoeff(), 1e-9)});
+    viz.setScalars(s.prefix + "mesh", d, {"moved, % diag", ColorMap::Viridis, 0.0, std::max(d.maxCoeff(), 1e-9)});
   }
   char buf[256];
   std::snprintf(buf, sizeof buf, "tetdeform report: %lld tets, %d iterations%s, volume ratio %.4f",
@@ -149,10 +149,10 @@ void load_fit_report(Visualizer& viz, Scene& s, const nlohmann::json& j) {
       j["metrics"]["point_spacing"].get<double>() > 0)
     top = 3.0 * j["metrics"]["point_spacing"].get<double>() * 100.0 / diag;
   const double p99 = v.empty() ? 0 : v[std::min(v.size() - 1, size_t(0.99 * double(v.size())))];
-  viz.addMesh("fit", fit, {0.8, 0.8, 0.8});
-  viz.setOpacity("fit", 0.55);
-  viz.addPoints("scan", P, {}, 4.0);
-  viz.setScalars("scan", s.heat, {"scan->fit, % diag", ColorMap::Viridis, 0.0, std::max(top, 1e-9), true});
+  viz.addMesh(s.prefix + "fit", fit, {0.8, 0.8, 0.8});
+  viz.setOpacity(s.prefix + "fit", 0.55);
+  viz.addPoints(s.prefix + "scan", P, {}, 4.0);
+  viz.setScalars(s.prefix + "scan", s.heat, {"scan->fit, % diag", ColorMap::Viridis, 0.0, std::max(top, 1e-9), true});
   s.heat_top = top;
   char buf[256];
   std::snprintf(buf, sizeof buf, "fit report: %lld scan points, scan -> fit median %.3f %%, p99 %.3f %%, max %.3f %% of the diagonal",
@@ -175,8 +175,8 @@ void load_studio(Visualizer& viz, Scene& s) {
   s.studio = read_studio(s.path);
   const auto& cams = s.studio.cameras;
   const double depth = image_plane_depth(s.studio);
-  for (std::size_t k = 0; k < cams.size(); ++k) viz.addCamera("camera:" + cams[k].camera.name(), cams[k].camera, depth);
-  if (!s.studio.template_mesh.empty()) viz.addMesh("mesh", read_mesh(s.studio.resolve(s.studio.template_mesh)));
+  for (std::size_t k = 0; k < cams.size(); ++k) viz.addCamera(s.prefix + "camera:" + cams[k].camera.name(), cams[k].camera, depth);
+  if (!s.studio.template_mesh.empty()) viz.addMesh(s.prefix + "mesh", read_mesh(s.studio.resolve(s.studio.template_mesh)));
   s.summary = "studio " + s.studio.name + ": " + std::to_string(cams.size()) + " cameras, frames " +
               std::to_string(s.studio.first_frame) + "-" + std::to_string(s.studio.last_frame);
 }
@@ -203,32 +203,33 @@ FileKind classify(const std::string& path) {
                   "(.mesh), fit reports (.json from tbsp fit --report), studios (studio.yaml) and folders of meshes");
 }
 
-Scene load_scene(Visualizer& viz, const std::string& path) {
+Scene load_scene(Visualizer& viz, const std::string& path, const std::string& prefix) {
   Scene s;
   s.path = path;
+  s.prefix = prefix;
   s.kind = classify(path);
   switch (s.kind) {
     case FileKind::Mesh: {
       TriMesh m = read_mesh(path);
       if (m.F.rows() == 0) {
         s.kind = FileKind::Cloud;
-        viz.addPoints("cloud", m.V, {}, 3.0);
+        viz.addPoints(s.prefix + "cloud", m.V, {}, 3.0);
         s.summary = path + ": " + std::to_string(m.V.rows()) + " points";
       } else {
-        viz.addMesh("mesh", m);
+        viz.addMesh(s.prefix + "mesh", m);
         s.summary = path + ": " + std::to_string(m.V.rows()) + " vertices, " + std::to_string(m.F.rows()) + " faces";
       }
       break;
     }
     case FileKind::Cloud: {
       const Eigen::MatrixX3d P = cloud_points(path);
-      viz.addPoints("cloud", P, {}, 3.0);
+      viz.addPoints(s.prefix + "cloud", P, {}, 3.0);
       s.summary = path + ": " + std::to_string(P.rows()) + " points";
       break;
     }
     case FileKind::TetMesh: {
       const TetMesh t = read_tet_mesh(path);
-      viz.addTetMesh("tets", t);
+      viz.addTetMesh(s.prefix + "tets", t);
       s.summary = path + ": " + std::to_string(t.V.rows()) + " vertices, " + std::to_string(t.T.rows()) + " tets";
       break;
     }
@@ -265,7 +266,7 @@ Scene load_scene(Visualizer& viz, const std::string& path) {
       std::sort(s.frames.begin(), s.frames.end());
       if (s.frames.empty())
         throw FileError(path + ": the folder holds no mesh (.ply .obj .off .vtk .stl); a sequence is one mesh per frame");
-      viz.addMesh("mesh", read_mesh(s.frames[0]));
+      viz.addMesh(s.prefix + "mesh", read_mesh(s.frames[0]));
       s.summary = path + ": " + std::to_string(s.frames.size()) + " frames";
       break;
     }
@@ -292,9 +293,9 @@ void show_frame(Visualizer& viz, const Scene& s, int index) {
   if (s.kind == FileKind::MeshSequence) {
     const TriMesh m = read_mesh(s.frames[std::size_t(index)]);
     try {
-      viz.updatePositions("mesh", m.V);
+      viz.updatePositions(s.prefix + "mesh", m.V);
     } catch (const InvalidInput&) {
-      viz.addMesh("mesh", m);  // another connectivity: replace
+      viz.addMesh(s.prefix + "mesh", m);  // another connectivity: replace
     }
   } else if (s.kind == FileKind::Studio) {
     const auto& cams = s.studio.cameras;
@@ -303,16 +304,16 @@ void show_frame(Visualizer& viz, const Scene& s, int index) {
       int w = 0, h = 0;
       auto rgb = studio_image_rgb(s.studio, int(k), index, &w, &h);
       if (!rgb.empty() && w == cams[k].camera.width() && h == cams[k].camera.height())
-        viz.addCamera("camera:" + cams[k].camera.name(), cams[k].camera, depth, rgb);
+        viz.addCamera(s.prefix + "camera:" + cams[k].camera.name(), cams[k].camera, depth, rgb);
     }
     if (!s.studio.ground_truth.empty()) {
       const std::string p = s.studio.groundTruthPath(s.studio.first_frame + index);
       if (fs::exists(p)) {
         const TriMesh m = read_mesh(p);
-        if (viz.contains("mesh")) {
-          try { viz.updatePositions("mesh", m.V); } catch (const InvalidInput&) { viz.addMesh("mesh", m); }
+        if (viz.contains(s.prefix + "mesh")) {
+          try { viz.updatePositions(s.prefix + "mesh", m.V); } catch (const InvalidInput&) { viz.addMesh(s.prefix + "mesh", m); }
         } else {
-          viz.addMesh("mesh", m);
+          viz.addMesh(s.prefix + "mesh", m);
         }
       }
     }

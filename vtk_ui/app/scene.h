@@ -22,6 +22,7 @@ struct Scene {
   FileKind kind = FileKind::Mesh;
   std::string path;
   std::string summary;                  ///< one line for the status bar
+  std::string prefix;                   ///< prepended to its object ids (several scenes in one view)
   std::vector<std::string> frames;      ///< MeshSequence: mesh files in frame order
   Studio studio;                        ///< Studio
   int numFrames() const;                ///< 1 for single files
@@ -35,9 +36,10 @@ struct Scene {
 /// \throws FileError naming the file when it does not exist or is of no kind we open.
 FileKind classify(const std::string& path);
 
-/// \brief Loads `path` into `viz` (objects "mesh", "cloud", "tets", "fit", "scan", "camera:NAME"),
-/// frame 0 for sequences. \throws FileError / InvalidInput naming the file, the item and the fix.
-Scene load_scene(Visualizer& viz, const std::string& path);
+/// \brief Loads `path` into `viz` (objects PREFIX + "mesh", "cloud", "tets", "fit", "scan", "rest",
+/// "camera:NAME"), frame 0 for sequences. \throws FileError / InvalidInput naming the file, the
+/// item and the fix.
+Scene load_scene(Visualizer& viz, const std::string& path, const std::string& prefix = "");
 
 /// Shows frame `index` (0-based) of a sequence or studio: the mesh of that frame, the camera
 /// images of that frame on the image planes. \throws FileError naming the frame's file.

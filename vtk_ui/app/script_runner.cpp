@@ -12,7 +12,7 @@ namespace tbsp::studio {
 
 namespace {
 
-const std::set<std::string> kActions = {"open", "edit", "select", "add_handle", "add_rigid", "add_stiffness", "drag", "iterate",
+const std::set<std::string> kActions = {"open", "add", "edit", "select", "add_handle", "add_rigid", "add_stiffness", "drag", "iterate",
                                         "wait", "undo", "redo", "frame", "camera", "screenshot", "app_screenshot", "save",
                                         "report", "reset_measurements", "iterations_per_change", "rotation_field", "load_handles"};
 
@@ -50,7 +50,7 @@ nlohmann::json load_script(const std::string& path) {
     auto need = [&](bool ok, const std::string& what) {
       if (!ok) throw FileError(where + " (\"" + k + "\"): " + what);
     };
-    if (k == "open" || k == "screenshot" || k == "app_screenshot" || k == "report") need(v.is_string(), "expected a file path");
+    if (k == "open" || k == "add" || k == "screenshot" || k == "app_screenshot" || k == "report") need(v.is_string(), "expected a file path");
     if (k == "edit") need(v.is_string() || (v.is_object() && v.contains("mesh") && v["mesh"].is_string()),
                           "expected a path or {\"mesh\": PATH, \"tets\": N}");
     if (k == "iterate" || k == "undo" || k == "redo" || k == "frame" || k == "iterations_per_change")
@@ -128,6 +128,7 @@ bool ScriptRunner::run(const nlohmann::json& a) {
     return true;
   }
   if (k == "open") w_.openFile(QString::fromStdString(v.get<std::string>()));
+  else if (k == "add") w_.openFile(QString::fromStdString(v.get<std::string>()), true);
   else if (k == "edit") {
     const std::string mesh = v.is_string() ? v.get<std::string>() : v["mesh"].get<std::string>();
     const long tets = v.is_object() && v.contains("tets") ? v["tets"].get<long>() : 5000;

@@ -25,8 +25,7 @@ bool StudioWindow::openForEditing(const QString& path, long tets, EditSolver sol
     QApplication::processEvents();
     session_.open(path.toStdString(), tets, solver);
     editing_ = true;
-    scene_ = Scene{};
-    scene_.path.clear();
+    scenes_.clear();
     selection_.clear();
     gizmo_->SetEnabled(0);
     timeline_->setRange(0, 0);

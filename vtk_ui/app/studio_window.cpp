@@ -145,6 +145,11 @@ StudioWindow::~StudioWindow() {
 void StudioWindow::buildMenus() {
   auto* file = menuBar()->addMenu("&File");
   file->addAction("&Open...", this, &StudioWindow::onOpen, QKeySequence::Open);
+  file->addAction("&Add to the view...", this, [this] {
+    const QString p = QFileDialog::getOpenFileName(this, "Add", QString(),
+        "tbsp files (*.ply *.obj *.off *.vtk *.stl *.pcd *.mesh *.json *.yaml *.yml);;All files (*)");
+    if (!p.isEmpty()) openFile(p, true);
+  }, QKeySequence("Ctrl+Shift+O"));
   file->addAction("Open for &editing...", this, &StudioWindow::onOpenForEditing, QKeySequence("Ctrl+E"));
   file->addAction("Open for s&urface editing (Laplacian)...", this, [this] {
     const QString p = QFileDialog::getOpenFileName(this, "Open for surface editing", QString(), "meshes (*.ply *.obj *.off *.vtk *.stl)");
@@ -206,50 +211,73 @@ void StudioWindow::showError(const QString& message) {
   status("error: " + message);
 }
 
-bool StudioWindow::openFile(const QString& path) {
-  try {
-    // load into a scratch scene first: a failure leaves the current one intact
-    Scene s;
-    session_.waitIdle();
+const Scene* StudioWindow::studioScene() const {
+  for (const auto& sc : scenes_)
+    if (sc.kind == FileKind::Studio) return &sc;
+  return nullptr;
+}
+
+int StudioWindow::numFrames() const {
+  int n = 1;
+  for (const auto& sc : scenes_) n = std::max(n, sc.numFrames());
+  return n;
+}
+
+void StudioWindow::removeScene(const Scene& sc) {
+  for (const auto& id : viz_->ids())
+    if (id.compare(0, sc.prefix.size(), sc.prefix) == 0) viz_->remove(id);
+}
+
+bool StudioWindow::openFile(const QString& path, bool add) {
+  session_.waitIdle();
+  gizmo_->SetEnabled(0);
+  if (!add || editing_) {  // replace everything
     for (const auto& id : viz_->ids()) viz_->remove(id);
-    gizmo_->SetEnabled(0);
-    s = load_scene(*viz_, path.toStdString());
-    scene_ = std::move(s);
+    scenes_.clear();
     editing_ = false;
-    frame_ = 0;
-    timeline_->blockSignals(true);
-    timeline_->setRange(0, std::max(0, scene_.numFrames() - 1));
-    timeline_->setValue(0);
-    timeline_->blockSignals(false);
-    auto* cameras = findChild<QComboBox*>("cameras");
-    cameras->blockSignals(true);
-    cameras->clear();
-    for (const auto& c : scene_.studio.cameras) cameras->addItem(QString::fromStdString(c.camera.name()));
-    cameras->blockSignals(false);
-    image_camera_ = 0;
-    if (scene_.numFrames() > 1 || scene_.kind == FileKind::Studio) show_frame(*viz_, scene_, 0);
-    findChild<QWidget*>("side")->setVisible(scene_.kind == FileKind::Studio);
-    updateImagePanel();
-    viz_->setText(scene_.kind == FileKind::FitReport ? "fit error heatmap" : "");
-    viz_->resetCamera();
-    viz_->render();
-    status(QString::fromStdString(scene_.summary));
-    return true;
+  }
+  // each file's objects carry its own prefix, so a failed file is removed without touching the others
+  const std::string prefix = "s" + std::to_string(next_scene_++) + ":";
+  Scene sc;
+  sc.prefix = prefix;
+  try {
+    sc = load_scene(*viz_, path.toStdString(), prefix);
   } catch (const std::exception& e) {
+    removeScene(sc);
     showError(QString::fromStdString(e.what()));
-    // what was shown before may be partly replaced: reload it when it was a file
-    if (!scene_.path.empty() && scene_.path != path.toStdString()) {
-      try {
-        for (const auto& id : viz_->ids()) viz_->remove(id);
-        scene_ = load_scene(*viz_, scene_.path);
-      } catch (const std::exception&) {
-      }
-    } else if (editing_) {
-      showEditedMesh();
-    }
     viz_->render();
     return false;
   }
+  scenes_.push_back(std::move(sc));
+  const Scene& added = scenes_.back();
+  frame_ = 0;
+  timeline_->blockSignals(true);
+  timeline_->setRange(0, std::max(0, numFrames() - 1));
+  timeline_->setValue(0);
+  timeline_->blockSignals(false);
+  const Scene* st = studioScene();
+  auto* cameras = findChild<QComboBox*>("cameras");
+  cameras->blockSignals(true);
+  cameras->clear();
+  if (st)
+    for (const auto& c : st->studio.cameras) cameras->addItem(QString::fromStdString(c.camera.name()));
+  cameras->blockSignals(false);
+  image_camera_ = 0;
+  for (const auto& s2 : scenes_)
+    if (s2.numFrames() > 1 || s2.kind == FileKind::Studio) {
+      try {
+        show_frame(*viz_, s2, 0);
+      } catch (const std::exception& e) {
+        showError(QString::fromStdString(e.what()));
+      }
+    }
+  findChild<QWidget*>("side")->setVisible(st != nullptr);
+  updateImagePanel();
+  viz_->setText(added.kind == FileKind::FitReport ? "fit error heatmap" : "");
+  viz_->resetCamera();
+  viz_->render();
+  status(QString::fromStdString(added.summary));
+  return true;
 }
 
 void StudioWindow::setFrame(int index) {
@@ -260,10 +288,13 @@ void StudioWindow::setFrame(int index) {
     timeline_->setValue(index);
     timeline_->blockSignals(false);
   }
-  try {
-    show_frame(*viz_, scene_, index);
-  } catch (const std::exception& e) {
-    showError(QString::fromStdString(e.what()));
+  for (const auto& sc : scenes_) {
+    if (index >= sc.numFrames()) continue;
+    try {
+      show_frame(*viz_, sc, index);
+    } catch (const std::exception& e) {
+      showError(QString::fromStdString(e.what()));
+    }
   }
   updateImagePanel();
   viz_->render();
@@ -271,10 +302,11 @@ void StudioWindow::setFrame(int index) {
 }
 
 void StudioWindow::updateImagePanel() {
-  if (scene_.kind != FileKind::Studio || scene_.studio.cameras.empty()) return;
+  const Scene* st = studioScene();
+  if (!st || st->studio.cameras.empty() || frame_ >= st->numFrames()) return;
   try {
     int w = 0, h = 0;
-    const auto rgb = studio_image_rgb(scene_.studio, image_camera_, frame_, &w, &h);
+    const auto rgb = studio_image_rgb(st->studio, image_camera_, frame_, &w, &h);
     if (rgb.empty()) return image_->setText("this camera has no images");
     QImage img(rgb.data(), w, h, w * 3, QImage::Format_RGB888);
     image_->setPixmap(QPixmap::fromImage(img.copy()).scaled(image_->size(), Qt::KeepAspectRatio, Qt::SmoothTransformation));
@@ -285,7 +317,7 @@ void StudioWindow::updateImagePanel() {
 
 void StudioWindow::onPlay() {
   if (play_timer_.isActive()) return play_timer_.stop();
-  const double fps = scene_.kind == FileKind::Studio ? scene_.studio.frame_rate : 25.0;
+  const double fps = studioScene() ? studioScene()->studio.frame_rate : 25.0;
   play_timer_.start(int(1000.0 / std::max(1.0, fps)));
 }
 

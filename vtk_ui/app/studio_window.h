@@ -44,12 +44,13 @@ public:
   ~StudioWindow() override;
 
   // --- viewer --------------------------------------------------------------------------
-  /// Opens a file into the view (replacing what was there). On failure shows the message,
-  /// keeps the current session and returns false.
-  bool openFile(const QString& path);
+  /// Opens a file into the view, replacing what was there, or with `add` beside it (a studio
+  /// and the mesh sequence tracked from it play on one timeline). On failure shows the message,
+  /// removes what the file had added, keeps the rest and returns false.
+  bool openFile(const QString& path, bool add = false);
   /// Timeline position (0-based frame index of a sequence or studio).
   void setFrame(int index);
-  int numFrames() const { return scene_.numFrames(); }
+  int numFrames() const;
   Visualizer& viz() { return *viz_; }
 
   // --- editing (ch. 8) -------------------------------------------------------------------
@@ -113,6 +114,8 @@ private:
   void requestSolve();
   void updateImagePanel();
   void status(const QString& s);
+  const Scene* studioScene() const;    // the first studio among the open scenes
+  void removeScene(const Scene& sc);
 
   QVTKOpenGLNativeWidget* vtk_ = nullptr;
   vtkNew<vtkGenericOpenGLRenderWindow> window_;
@@ -123,7 +126,8 @@ private:
   QRubberBand* band_ = nullptr;
   QPoint band_origin_;
   bool select_mode_ = false;
-  Scene scene_;
+  std::vector<Scene> scenes_;          // what is open (each with its id prefix)
+  int next_scene_ = 0;
   int frame_ = 0;
   int image_camera_ = 0;
 
