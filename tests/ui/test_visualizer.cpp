@@ -43,6 +43,14 @@ int pixels_near(const cv::Mat& bgr, const Eigen::Vector3d& rgb, int tol) {
   return n;
 }
 
+tbsp::VisualizerOptions offscreen(int w, int h) {
+  tbsp::VisualizerOptions o;
+  o.offscreen = true;
+  o.width = w;
+  o.height = h;
+  return o;
+}
+
 }  // namespace
 
 TEST(Visualizer, PclCloudWithAHeatmapRendersOffscreenInItsColours) {
@@ -57,11 +65,7 @@ TEST(Visualizer, PclCloudWithAHeatmapRendersOffscreenInItsColours) {
     }
   cloud.push_back(pcl::PointXYZ(NAN, 0, 0));  // skipped
   value = Eigen::Map<Eigen::VectorXd>(vals.data(), Eigen::Index(vals.size()));
-  tbsp::VisualizerOptions o;
-  o.offscreen = true;
-  o.width = 400;
-  o.height = 300;
-  tbsp::Visualizer viz(o);
+  tbsp::Visualizer viz(offscreen(400, 300));
   viz.addPointCloud("cloud", cloud, 8.0);
   viz.setScalars("cloud", value, {"value", tbsp::ColorMap::Viridis, 0.0, 1.0});
   EXPECT_THROW(viz.setScalars("cloud", Eigen::VectorXd::Zero(5), {}), tbsp::InvalidInput);
@@ -86,11 +90,7 @@ TEST(Visualizer, PclCloudWithAHeatmapRendersOffscreenInItsColours) {
 
 TEST(Visualizer, MeshIsCentredAndSelectionSeesOnlyTheFrontSide) {
   const tbsp::TriMesh sphere = tbsp::make_icosphere(3);
-  tbsp::VisualizerOptions o;
-  o.offscreen = true;
-  o.width = 320;
-  o.height = 240;
-  tbsp::Visualizer viz(o);
+  tbsp::Visualizer viz(offscreen(320, 240));
   viz.addMesh("s", sphere);
   viz.setCameraPose({0, 0, 5}, {0, 0, 0}, {0, 1, 0});
   viz.resetCamera();
@@ -130,11 +130,7 @@ TEST(Visualizer, TetMeshCameraSpheresLinesAndBadArguments) {
   t.V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1;
   t.T.resize(1, 4);
   t.T << 0, 1, 2, 3;
-  tbsp::VisualizerOptions o;
-  o.offscreen = true;
-  o.width = 200;
-  o.height = 150;
-  tbsp::Visualizer viz(o);
+  tbsp::Visualizer viz(offscreen(200, 150));
   viz.addTetMesh("t", t);
   tbsp::Camera cam("c", 40, 30, (Eigen::Matrix3d() << 40, 0, 20, 0, 40, 15, 0, 0, 1).finished(), Eigen::Matrix3d::Identity(),
                    Eigen::Vector3d(0, 0, 3));

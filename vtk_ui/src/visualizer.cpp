@@ -135,6 +135,16 @@ struct Visualizer::Impl {
   std::string bar_owner;                   // the object whose scalars the colour bar shows
   std::vector<std::string> order;
 
+  // The mapper of o.poly (no scalars yet) and an actor with one colour.
+  static SP<vtkActor> plain_actor(Object& o, const Eigen::Vector3d& rgb) {
+    o.mapper = SP<vtkPolyDataMapper>::New();
+    o.mapper->SetInputData(o.poly);
+    o.mapper->ScalarVisibilityOff();
+    auto actor = SP<vtkActor>::New();
+    actor->SetMapper(o.mapper);
+    actor->GetProperty()->SetColor(rgb.x(), rgb.y(), rgb.z());
+    return actor;
+  }
   Object& get(const std::string& id, const char* who) {
     auto it = objects.find(id);
     if (it == objects.end()) throw InvalidInput(std::string("Visualizer::") + who + ": no object \"" + id + "\"");
@@ -227,12 +237,7 @@ void Visualizer::addMesh(const std::string& id, const TriMesh& mesh, const Eigen
   o.poly->SetPolys(to_triangles(mesh.F, mesh.V.rows(), id));
   o.poly->GetPointData()->SetNormals(vertex_normal_array(mesh.V, mesh.F));
   o.F = mesh.F;
-  o.mapper = SP<vtkPolyDataMapper>::New();
-  o.mapper->SetInputData(o.poly);
-  o.mapper->ScalarVisibilityOff();
-  auto actor = SP<vtkActor>::New();
-  actor->SetMapper(o.mapper);
-  actor->GetProperty()->SetColor(rgb.x(), rgb.y(), rgb.z());
+  auto actor = Impl::plain_actor(o, rgb);
   actor->GetProperty()->SetInterpolationToPhong();
   actor->GetProperty()->SetSpecular(0.15);
   o.props.push_back(actor);
@@ -482,12 +487,7 @@ void Visualizer::addLines(const std::string& id, const Eigen::MatrixX3d& from, c
     lines->InsertNextCell(2, ids);
   }
   o.poly->SetLines(lines);
-  o.mapper = SP<vtkPolyDataMapper>::New();
-  o.mapper->SetInputData(o.poly);
-  o.mapper->ScalarVisibilityOff();
-  auto actor = SP<vtkActor>::New();
-  actor->SetMapper(o.mapper);
-  actor->GetProperty()->SetColor(rgb.x(), rgb.y(), rgb.z());
+  auto actor = Impl::plain_actor(o, rgb);
   actor->GetProperty()->SetLineWidth(float(width));
   actor->GetProperty()->LightingOff();
   o.props.push_back(actor);
