@@ -116,3 +116,20 @@ TEST(EditSession, SurfaceSolverFollowsDragsAndEqualsItsReplay) {
   EXPECT_EQ(c["rotation_field"], true);
   EXPECT_EQ(c["constraints"].size(), 2u);
 }
+
+TEST(EditSession, ReopeningNeverReusesTheSolverOfThePreviousMesh) {
+  tbsp::studio::EditSession s;
+  const nlohmann::json fixed = {{"box", {{"min", {-1, -1, -1}}, {"max", {0.05, 1, 1}}}}};
+  const nlohmann::json moved = {{"box", {{"min", {0.95, -1, -1}}, {"max", {2, 1, 1}}}}};
+  for (long tets : {0L, 3000L}) {  // same regions, another tet mesh: the structure key alone would match
+    s.open(sample("bumpy_bar.off"), tets);
+    s.addHandle(fixed);
+    s.addHandle(moved);
+    s.setHandleMotion(1, {0, 0.3, 0});
+    s.requestIterations(300);
+    s.waitIdle();
+    const tbsp::TriMesh r = s.replay(300);
+    ASSERT_EQ(s.currentSurface().rows(), r.V.rows());
+    EXPECT_LT((s.currentSurface() - r.V).cwiseAbs().maxCoeff(), 5e-3) << "tets " << tets;
+  }
+}

@@ -105,6 +105,7 @@ void EditSession::open(const std::string& path, long target_tets, EditSolver sol
   path_ = path;
   target_tets_ = target_tets;
   solver_ = solver;
+  ++setup_serial_;
   docs_ = Docs{{{"handles", nlohmann::json::array()}}, nlohmann::json(), nlohmann::json(), false};
   undo_.clear();
   redo_.clear();
@@ -356,7 +357,7 @@ void EditSession::workerLoop() {
   std::unique_ptr<TetDeformer> d;
   std::unique_ptr<LaplacianDeformer> lap;
   std::unique_ptr<DeformationTransfer> transfer;
-  const TetJobSetup* transfer_for = nullptr;
+  long transfer_for = -1;  // setup serial the transfer was precomputed for
   std::string applied_key;
   long applied_version = -1;
   for (;;) {
@@ -364,6 +365,8 @@ void EditSession::workerLoop() {
     long version = 0;
     bool changed = false;
     const TetJobSetup* s = nullptr;
+    EditSolver solver = EditSolver::Tet;
+    long version_of_setup = 0;
     {
       std::unique_lock<std::mutex> lk(m_);
       cv_.wait(lk, [&] { return stop_ || pending_ > 0; });
@@ -373,13 +376,15 @@ void EditSession::workerLoop() {
       changed = version != applied_version;
       if (changed) docs = worker_docs_;
       s = setup_.get();
+      solver = solver_;
+      version_of_setup = setup_serial_;
     }
     EditFrame fr;
     bool stop_now = false;
     const auto t0 = std::chrono::steady_clock::now();
     try {
       if (s == nullptr) throw InvalidInput("no mesh is open");
-      if (solver_ == EditSolver::Surface) {
+      if (solver == EditSolver::Surface) {
         // one linear solve per change; the factorization is kept while only motions change
         if (docs.handles["handles"].empty()) {
           lap.reset();
@@ -388,7 +393,8 @@ void EditSession::workerLoop() {
           fr.rebuilt = true;
         } else {
           const DeformJob job = parse_constraints_json(constraintsDocOf(docs), s->surface, "constraints");
-          const std::string key = structure_key(docs.handles, docs.rigid, docs.stiffness) + (docs.rotation_field ? "|rf" : "");
+          const std::string key = structure_key(docs.handles, docs.rigid, docs.stiffness) + (docs.rotation_field ? "|rf" : "") +
+                                   "|" + std::to_string(version_of_setup);
           if (!lap || key != applied_key) {
             lap = std::make_unique<LaplacianDeformer>();
             if (job.weights) lap->setLaplacianWeights(*job.weights);
@@ -419,7 +425,7 @@ void EditSession::workerLoop() {
           fr.rebuilt = true;
         } else {
           const TetJob job = parseDocs(docs);
-          const std::string key = structure_key(docs.handles, docs.rigid, docs.stiffness);
+          const std::string key = structure_key(docs.handles, docs.rigid, docs.stiffness) + "|" + std::to_string(version_of_setup);
           if (!d || key != applied_key) {
             d = std::make_unique<TetDeformer>();
             d->setMesh(s->tets);
@@ -438,17 +444,17 @@ void EditSession::workerLoop() {
         }
         applied_version = version;
       }
-      if (solver_ == EditSolver::Surface) {
+      if (solver == EditSolver::Surface) {
       } else if (d && !stop_now) {
         fr.e_nonrigid = d->iterate();
         fr.iteration = ++iterations_;
         if (s->from_tets || !s->decimated) {
           fr.surface = d->positions().topRows(s->surface.V.rows());
         } else {
-          if (transfer_for != s) {
+          if (transfer_for != version_of_setup) {
             transfer = std::make_unique<DeformationTransfer>();
             transfer->precompute(s->tets, s->surface.V);
-            transfer_for = s;
+            transfer_for = version_of_setup;
           }
           fr.surface = transfer->apply(d->inputPositions());
         }

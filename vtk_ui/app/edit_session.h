@@ -163,6 +163,7 @@ private:
   std::string path_;
   long target_tets_ = 0;
   EditSolver solver_ = EditSolver::Tet;
+  long setup_serial_ = 0;            // bumped by open(): the worker never reuses a deformer of another mesh
   Docs docs_;
   std::vector<Docs> undo_, redo_;
 
