@@ -289,27 +289,19 @@ nlohmann::json EditSession::constraintsDocOf(const Docs& d) const {
 
 nlohmann::json EditSession::constraintsDoc() const { return constraintsDocOf(docs_); }
 
-bool EditSession::undo() {
+bool EditSession::step(std::vector<Docs>& from, std::vector<Docs>& to) {
   std::lock_guard<std::mutex> lk(m_);
-  if (undo_.empty()) return false;
-  redo_.push_back(docs_);
-  docs_ = undo_.back();
-  undo_.pop_back();
+  if (from.empty()) return false;
+  to.push_back(docs_);
+  docs_ = from.back();
+  from.pop_back();
   worker_docs_ = docs_;
   ++version_;
   return true;
 }
 
-bool EditSession::redo() {
-  std::lock_guard<std::mutex> lk(m_);
-  if (redo_.empty()) return false;
-  undo_.push_back(docs_);
-  docs_ = redo_.back();
-  redo_.pop_back();
-  worker_docs_ = docs_;
-  ++version_;
-  return true;
-}
+bool EditSession::undo() { return step(undo_, redo_); }
+bool EditSession::redo() { return step(redo_, undo_); }
 
 void EditSession::setFrameCallback(FrameCallback cb) {
   std::lock_guard<std::mutex> in_call(callback_m_);  // a callback running now finishes first

@@ -156,6 +156,7 @@ private:
   nlohmann::json constraintsDocOf(const Docs& d) const;
   TetJob parseDocs(const Docs& d) const;  // the CLI's parser, file names "handles" / "rigid" / "stiffness"
   void edit(const std::function<void(Docs&)>& change, bool undoable = true);  // validates, pushes undo
+  bool step(std::vector<Docs>& from, std::vector<Docs>& to);  // undo / redo: from's last state becomes current
   void workerLoop();
   void stopWorker();
 
