@@ -1,0 +1,301 @@
+// PbdClothSimulator: one sub-step (external forces, prediction, constraint projection, velocity
+// update) and the constraint projections of thesis eq. 10.2-10.5.
+#include <algorithm>
+#include <cmath>
+
+#include "tbsp/cloth/pbd_cloth_simulator.h"
+
+namespace tbsp {
+
+namespace {
+
+// Per-iteration stiffness so that n iterations of k' give the effect of one projection of k
+// (Müller et al. 2007, §3.3): 1 − (1 − k)^(1/n).
+double per_iteration(double k, int n) { return k >= 1 ? 1.0 : 1.0 - std::pow(1.0 - k, 1.0 / n); }
+
+// Largest bending stiffness of one sweep: the linearised dihedral projection overshoots and
+// can diverge at full stiffness (k_bend = 1 would give 1 per sweep).
+constexpr double kMaxBendSweep = 0.5;
+
+// Parallel only when a sweep is large enough to pay for the barrier.
+constexpr std::size_t kParallelMin = 2048;
+
+}  // namespace
+
+void PbdClothSimulator::applyExternal(double dt) {
+  const std::size_t n = pos_.size();
+  // area-weighted vertex normals of the current positions (for the drag split, eq. 10.5)
+  Points normal(n, Eigen::Vector3d::Zero());
+  for (Eigen::Index f = 0; f < F_.rows(); ++f) {
+    const Eigen::Vector3d& a = pos_[std::size_t(F_(f, 0))];
+    const Eigen::Vector3d fn = (pos_[std::size_t(F_(f, 1))] - a).cross(pos_[std::size_t(F_(f, 2))] - a);
+    for (int k = 0; k < 3; ++k) normal[std::size_t(F_(f, k))] += fn;
+  }
+  const double h = settings_.drag_constant, unit = settings_.drag_unit;
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+  for (std::size_t i = 0; i < n; ++i) {
+    if (inv_mass_[i] == 0) continue;
+    const ClothMaterial& m = materials_[std::size_t(region_(Eigen::Index(i)))];
+    Eigen::Vector3d acc = settings_.gravity;
+    const double len = normal[i].norm();
+    if (len > 0 && h > 0) {
+      // f_d = −½ A h (d_n |u_n|² n̂ + d_t u_t), A = m: the acceleration is f_d / m
+      const Eigen::Vector3d nn = normal[i] / len;
+      const Eigen::Vector3d un = vel_[i].dot(nn) * nn, ut = vel_[i] - un;
+      acc -= 0.5 * h * (m.d_n * un.norm() / unit * un + m.d_t * ut);
+    }
+    vel_[i] += dt * acc;
+  }
+}
+
+void PbdClothSimulator::findProxyCandidates(const std::vector<RoundCone>& prev, const std::vector<RoundCone>& next,
+                                            double travel) {
+  const std::size_t n = pos_.size();
+  proxy_pairs_.clear();
+  proxy_offsets_.assign(n + 1, 0);
+  if (next.empty()) return;
+  // bounding spheres of each proxy over the frame (both poses), padded by the thickness and by
+  // the farthest any vertex travels in the frame
+  std::vector<Eigen::Vector3d> c0(next.size()), c1(next.size());
+  std::vector<double> r(next.size());
+  for (std::size_t k = 0; k < next.size(); ++k) {
+    c0[k] = 0.5 * (prev[k].a + prev[k].b);
+    c1[k] = 0.5 * (next[k].a + next[k].b);
+    r[k] = 0.5 * std::max((next[k].b - next[k].a).norm(), (prev[k].b - prev[k].a).norm()) +
+           std::max({next[k].ra, next[k].rb, prev[k].ra, prev[k].rb}) + 2 * settings_.thickness + travel;
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    proxy_offsets_[i] = int(proxy_pairs_.size());
+    if (inv_mass_[i] == 0) continue;
+    for (std::size_t k = 0; k < next.size(); ++k) {
+      // distance from the vertex to the segment swept by the sphere centre
+      const Eigen::Vector3d d = c1[k] - c0[k];
+      const double t = d.squaredNorm() > 0 ? std::clamp((pos_[i] - c0[k]).dot(d) / d.squaredNorm(), 0.0, 1.0) : 0.0;
+      if ((pos_[i] - (c0[k] + t * d)).norm() < r[k] + travel) proxy_pairs_.emplace_back(int(i), int(k));
+    }
+  }
+  proxy_offsets_[n] = int(proxy_pairs_.size());
+}
+
+void PbdClothSimulator::findSelfContacts(double travel) {
+  self_pairs_.clear();
+  const double s = 2 * settings_.thickness;
+  if (!settings_.self_collision || s <= 0) return;
+  const std::size_t n = pos_.size();
+  // vertices that can come within s of each other during the frame: distance < s + 2·travel.
+  // Sorted by grid cell (cell size = that reach); the 27 neighbouring cells by binary search.
+  const double reach = s + 2 * travel;
+  auto cell = [&](const Eigen::Vector3d& p) {
+    return Eigen::Vector3i(int(std::floor(p.x() / reach)), int(std::floor(p.y() / reach)), int(std::floor(p.z() / reach)));
+  };
+  auto key = [](const Eigen::Vector3i& c) {
+    const auto u = [](int v) { return std::uint64_t(std::uint32_t(v + (1 << 20)) & 0x1FFFFF); };
+    return (u(c.x()) << 42) | (u(c.y()) << 21) | u(c.z());
+  };
+  std::vector<std::pair<std::uint64_t, int>> sorted(n);
+  for (std::size_t i = 0; i < n; ++i) sorted[i] = {key(cell(pos_[i])), int(i)};
+  std::sort(sorted.begin(), sorted.end());
+  const double exclude = 2 * s;  // rest neighbours closer than this are not contacts
+  for (std::size_t i = 0; i < n; ++i) {
+    if (inv_mass_[i] == 0) continue;
+    const Eigen::Vector3i c = cell(pos_[i]);
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const std::uint64_t k = key(c + Eigen::Vector3i(dx, dy, dz));
+          auto lo = std::lower_bound(sorted.begin(), sorted.end(), std::make_pair(k, -1));
+          for (; lo != sorted.end() && lo->first == k; ++lo) {
+            const std::size_t j = std::size_t(lo->second);
+            if (j == i || (inv_mass_[j] != 0 && j < i)) continue;  // each simulated pair once
+            if ((pos_[i] - pos_[j]).squaredNorm() > reach * reach) continue;
+            if ((rest_.row(Eigen::Index(i)) - rest_.row(Eigen::Index(j))).squaredNorm() < exclude * exclude) continue;
+            self_pairs_.emplace_back(int(i), int(j));
+          }
+        }
+  }
+  std::sort(self_pairs_.begin(), self_pairs_.end());
+}
+
+void PbdClothSimulator::projectStretch(double k) {
+  for (const auto& colour : stretch_colours_) {
+    const bool serial = &colour == &stretch_colours_.back() && stretch_colours_.size() > 128;
+#pragma omp parallel for schedule(static) if (!serial && colour.size() >= kParallelMin)
+    for (std::size_t q = 0; q < colour.size(); ++q) {
+      const Stretch& c = stretch_[std::size_t(colour[q])];
+      const double wa = inv_mass_[std::size_t(c.a)], wb = inv_mass_[std::size_t(c.b)];
+      if (wa + wb == 0) continue;
+      Eigen::Vector3d& pa = pred_[std::size_t(c.a)];
+      Eigen::Vector3d& pb = pred_[std::size_t(c.b)];
+      const Eigen::Vector3d d = pa - pb;
+      const double len = d.norm();
+      if (len < 1e-12) continue;
+      const Eigen::Vector3d corr = (k * (len - c.rest) / ((wa + wb) * len)) * d;
+      pa -= wa * corr;
+      pb += wb * corr;
+    }
+  }
+}
+
+void PbdClothSimulator::projectBend(const std::vector<double>& kr) {
+  for (const auto& colour : bend_colours_) {
+    const bool serial = &colour == &bend_colours_.back() && bend_colours_.size() > 128;
+#pragma omp parallel for schedule(static) if (!serial && colour.size() >= kParallelMin)
+    for (std::size_t q = 0; q < colour.size(); ++q) {
+      const Bend& c = bend_[std::size_t(colour[q])];
+      const double k = kr[std::size_t(c.region)];
+      if (k == 0) continue;
+      // Bender's PBD dihedral constraint (gradients of Bridson et al. 2003): p2-p3 the edge,
+      // p0 and p1 the wings; φ = acos(n1·n2), C = φ − φ_rest (eq. 10.3)
+      const std::size_t i0 = std::size_t(c.c), i1 = std::size_t(c.d), i2 = std::size_t(c.a), i3 = std::size_t(c.b);
+      const double w0 = inv_mass_[i0], w1 = inv_mass_[i1], w2 = inv_mass_[i2], w3 = inv_mass_[i3];
+      if (w0 + w1 + w2 + w3 == 0) continue;
+      const Eigen::Vector3d &p0 = pred_[i0], &p1 = pred_[i1], &p2 = pred_[i2], &p3 = pred_[i3];
+      const Eigen::Vector3d e = p3 - p2;
+      const double elen = e.norm();
+      if (elen < 1e-12) continue;
+      Eigen::Vector3d n1 = (p2 - p0).cross(p3 - p0), n2 = (p3 - p1).cross(p2 - p1);
+      const double n1s = n1.squaredNorm(), n2s = n2.squaredNorm();
+      if (n1s < 1e-30 || n2s < 1e-30) continue;
+      n1 /= n1s;
+      n2 /= n2s;
+      const Eigen::Vector3d d0 = elen * n1, d1 = elen * n2;
+      const Eigen::Vector3d d2 = ((p0 - p3).dot(e) / elen) * n1 + ((p1 - p3).dot(e) / elen) * n2;
+      const Eigen::Vector3d d3 = ((p2 - p0).dot(e) / elen) * n1 + ((p2 - p1).dot(e) / elen) * n2;
+      // cos φ = N1·N2 / (|N1||N2|); here n = N/|N|², so |n1||n2| = 1/(|N1||N2|)
+      const double cosphi = n1.dot(n2) / std::sqrt(n1.squaredNorm() * n2.squaredNorm());
+      const double phi = std::acos(std::clamp(cosphi, -1.0, 1.0));
+      double lambda = w0 * d0.squaredNorm() + w1 * d1.squaredNorm() + w2 * d2.squaredNorm() + w3 * d3.squaredNorm();
+      // the free vertices cannot change the angle (e.g. only an edge vertex is free and the other
+      // three are collinear): the linearised step would be unbounded
+      const double wmax = std::max({w0, w1, w2, w3});
+      if (lambda <= 1e-6 * wmax * (d0.squaredNorm() + d1.squaredNorm() + d2.squaredNorm() + d3.squaredNorm())) continue;
+      lambda = (phi - c.rest) / lambda * k;
+      if (n1.cross(n2).dot(e) > 0) lambda = -lambda;
+      pred_[i0] -= w0 * lambda * d0;
+      pred_[i1] -= w1 * lambda * d1;
+      pred_[i2] -= w2 * lambda * d2;
+      pred_[i3] -= w3 * lambda * d3;
+    }
+  }
+}
+
+void PbdClothSimulator::projectBlend(const Points& targets, const std::vector<double>& k_blend) {
+  const std::size_t n = pred_.size();
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+  for (std::size_t i = 0; i < n; ++i)
+    if (inv_mass_[i] != 0 && k_blend[i] > 0) pred_[i] += k_blend[i] * (targets[i] - pred_[i]);
+}
+
+void PbdClothSimulator::projectProxies(const std::vector<RoundCone>& prev, const std::vector<RoundCone>& cur) {
+  if (proxy_pairs_.empty()) return;
+  const std::size_t n = pred_.size();
+  const double th = settings_.thickness, mu = settings_.friction;
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+  for (std::size_t i = 0; i < n; ++i)
+    for (int q = proxy_offsets_[i]; q < proxy_offsets_[i + 1]; ++q) {
+      const std::size_t k = std::size_t(proxy_pairs_[std::size_t(q)].second);
+      Eigen::Vector3d nrm;
+      const double sd = cur[k].signedDistance(pred_[i], &nrm);
+      if (sd >= th) continue;
+      const double depth = th - sd;
+      pred_[i] += depth * nrm;
+      if (mu <= 0) continue;
+      // Coulomb friction on the slide relative to the proxy surface during this sub-step
+      const Eigen::Vector3d ab = cur[k].b - cur[k].a;
+      const double t = ab.squaredNorm() > 0 ? std::clamp((pred_[i] - cur[k].a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
+      const Eigen::Vector3d surface = (1 - t) * (cur[k].a - prev[k].a) + t * (cur[k].b - prev[k].b);
+      const Eigen::Vector3d slide = (pred_[i] - pos_[i]) - surface;
+      const Eigen::Vector3d tang = slide - slide.dot(nrm) * nrm;
+      const double len = tang.norm();
+      if (len < mu * depth) pred_[i] -= tang;
+      else if (len > 0) pred_[i] -= (mu * depth / len) * tang;
+    }
+}
+
+void PbdClothSimulator::projectSelf() {
+  const double s = 2 * settings_.thickness;
+  for (const auto& [i, j] : self_pairs_) {
+    const double wi = inv_mass_[std::size_t(i)], wj = inv_mass_[std::size_t(j)];
+    Eigen::Vector3d d = pred_[std::size_t(i)] - pred_[std::size_t(j)];
+    const double len = d.norm();
+    if (len >= s || len < 1e-12 || wi + wj == 0) continue;
+    const Eigen::Vector3d corr = ((s - len) / ((wi + wj) * len)) * d;
+    pred_[std::size_t(i)] += wi * corr;
+    pred_[std::size_t(j)] -= wj * corr;
+  }
+}
+
+void PbdClothSimulator::contactVelocities(const std::vector<RoundCone>& prev, const std::vector<RoundCone>& cur, double dt) {
+  const std::size_t n = pos_.size();
+  const double th = settings_.thickness;
+  int contacts = 0;
+#pragma omp parallel for schedule(static) reduction(+ : contacts) if (n >= kParallelMin)
+  for (std::size_t i = 0; i < n; ++i) {
+    int best = -1;
+    double best_sd = std::numeric_limits<double>::infinity();
+    Eigen::Vector3d best_n = Eigen::Vector3d::Zero();
+    for (int q = proxy_offsets_[i]; q < proxy_offsets_[i + 1]; ++q) {
+      const int k = proxy_pairs_[std::size_t(q)].second;
+      Eigen::Vector3d nrm;
+      const double sd = cur[std::size_t(k)].signedDistance(pos_[i], &nrm);
+      if (sd < best_sd) best_sd = sd, best = k, best_n = nrm;
+    }
+    if (best < 0 || best_sd > th * 1.01 + 1e-12) continue;
+    ++contacts;
+    // surface velocity: the cone's axis point nearest the vertex, moved between sub-steps
+    const RoundCone& c = cur[std::size_t(best)];
+    const RoundCone& p = prev[std::size_t(best)];
+    const Eigen::Vector3d ab = c.b - c.a;
+    const double t = ab.squaredNorm() > 0 ? std::clamp((pos_[i] - c.a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
+    const Eigen::Vector3d vs = ((1 - t) * (c.a - p.a) + t * (c.b - p.b)) / dt;
+    const Eigen::Vector3d rel = vel_[i] - vs;
+    const double vn = rel.dot(best_n);
+    const Eigen::Vector3d vt = rel - vn * best_n;
+    const double vn_new = vn < 0 ? -settings_.restitution * vn : vn;
+    vel_[i] = vs + vn_new * best_n + vt;
+  }
+  proxy_contacts_ = contacts;
+}
+
+void PbdClothSimulator::substep(const Eigen::MatrixX3d& targets, const std::vector<RoundCone>& prev,
+                                const std::vector<RoundCone>& cur, double t1, double dt) {
+  const std::size_t n = pos_.size();
+  // targets at the end of this sub-step
+  Points tgt(n);
+  for (std::size_t i = 0; i < n; ++i)
+    tgt[i] = ((1 - t1) * targets_prev_.row(Eigen::Index(i)) + t1 * targets.row(Eigen::Index(i))).transpose();
+
+  applyExternal(dt);
+  for (std::size_t i = 0; i < n; ++i) pred_[i] = inv_mass_[i] != 0 ? Eigen::Vector3d(pos_[i] + dt * vel_[i]) : tgt[i];
+  const int it = settings_.iterations;
+  const int sweeps = it * settings_.substeps;  // stiffnesses are per frame: n_iter sweeps in total
+  const double ks = per_iteration(settings_.k_stretch, sweeps);
+  std::vector<double> kb(materials_.size());
+  for (std::size_t r = 0; r < materials_.size(); ++r) kb[r] = std::min(kMaxBendSweep, per_iteration(materials_[r].k_bend, sweeps));
+  if (k_blend_.size() != n || k_blend_sweeps_ != sweeps) {  // δ or the sweep count changed: recompute
+    k_blend_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) k_blend_[i] = per_iteration(1 - delta_(Eigen::Index(i)), sweeps);
+    k_blend_sweeps_ = sweeps;
+  }
+  const std::vector<double>& k_blend = k_blend_;
+
+  for (int iter = 0; iter < it; ++iter) {
+    projectStretch(ks);
+    projectBend(kb);
+    projectBlend(tgt, k_blend);
+    projectProxies(prev, cur);
+    projectSelf();
+  }
+  int self = 0;
+  const double s = 2 * settings_.thickness;
+  for (const auto& [i, j] : self_pairs_) self += (pred_[std::size_t(i)] - pred_[std::size_t(j)]).norm() < s * 1.01;
+  self_contacts_ = self;
+
+  for (std::size_t i = 0; i < n; ++i) {
+    vel_[i] = (pred_[i] - pos_[i]) / dt;
+    pos_[i] = pred_[i];
+  }
+  contactVelocities(prev, cur, dt);
+}
+
+}  // namespace tbsp
