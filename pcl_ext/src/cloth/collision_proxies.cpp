@@ -12,6 +12,11 @@ namespace tbsp {
 
 namespace {
 
+// The part of a bone used for the 1-D fit and the inside test: vertices near the joints (t close
+// to 0 or 1) are where bones meet the surface (joint caps, end sites) and say nothing about the
+// limb's radius.
+constexpr double kSideLo = 0.05, kSideHi = 0.95;
+
 Eigen::Vector3d any_perpendicular(const Eigen::Vector3d& u) {
   const Eigen::Vector3d c = std::abs(u.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
   return u.cross(c).normalized();
@@ -162,7 +167,7 @@ std::vector<CollisionProxy> fit_collision_proxies(const Eigen::MatrixX3d& V, con
     for (Eigen::Index i = 0; i < n; ++i) {
       if (nearest[std::size_t(i)] != b) continue;
       const double t = tpar[std::size_t(i)];
-      if (t < 0 || t > 1) continue;
+      if (t < kSideLo || t > kSideHi) continue;
       const double wgt = 1.0 / (sigma(i) + eps);
       const double r = std::max(0.0, rad[std::size_t(i)] - sigma(i));
       const Eigen::Vector2d x(1.0, t);
@@ -215,23 +220,26 @@ std::vector<CollisionProxy> fit_collision_proxies(const Eigen::MatrixX3d& V, con
     }
   }
 
-  // keep inside: shrink until no body vertex of the bone is deeper than allowed
+  // keep inside (in the 1-D model of the fit): no body vertex of the bone that projects onto its
+  // side may lie deeper than allowed inside the cone radius at its t; the caps reach
+  // past the joints by design and are not tested
   for (std::size_t k = 0; k < out.size(); ++k) {
     auto& p = out[k];
     const int b = out_bone[k];
-    for (int iter = 0; iter < 20; ++iter) {
-      const double allowed = o.max_penetration * 0.5 * (p.cone.ra + p.cone.rb);
-      double depth = 0;
-      for (Eigen::Index i = 0; i < n; ++i) {
-        if (nearest[std::size_t(i)] != b || cloth(i) >= 0.5) continue;
-        depth = std::max(depth, -p.cone.signedDistance(V.row(i).transpose()));
-      }
-      p.penetration = depth;
-      if (depth <= allowed * (1 + 1e-9)) break;
+    double depth = 0;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double t = tpar[std::size_t(i)];
+      if (nearest[std::size_t(i)] != b || cloth(i) >= 0.5 || t < kSideLo || t > kSideHi) continue;
+      depth = std::max(depth, p.cone.ra + (p.cone.rb - p.cone.ra) * t - rad[std::size_t(i)]);
+    }
+    const double allowed = o.max_penetration * 0.5 * (p.cone.ra + p.cone.rb);
+    if (depth > allowed) {
       const double shrink = depth - allowed;
       p.cone.ra = std::max(0.0, p.cone.ra - shrink);
       p.cone.rb = std::max(0.0, p.cone.rb - shrink);
+      depth = allowed;
     }
+    p.penetration = depth;
   }
   return out;
 }

@@ -34,7 +34,9 @@ struct CollisionProxy {
   Bone bone;       ///< the bone whose joint moves it
   RoundCone cone;  ///< in the rest pose (world coordinates)
   int vertices = 0;       ///< mesh vertices used for the fit
-  double penetration = 0; ///< largest depth of a body vertex (clothness < 0.5) inside the cone, rest pose
+  /// Largest depth of a body vertex (clothness < 0.5) of this bone inside the cone side, rest
+  /// pose, units of V (radial, in the 1-D model of the fit, over 0.05 ≤ t ≤ 0.95; the caps are not tested).
+  double penetration = 0;
 };
 
 /// Parameters of fit_collision_proxies.
@@ -53,11 +55,12 @@ struct ProxyFitOptions {
 };
 
 /// \brief Fits one capped cone per bone (§10.4, Fig. 10.3): every vertex is assigned to its
-/// nearest bone and written in cylindrical coordinates (t along the bone in [0,1], r around it);
+/// nearest bone and written in cylindrical coordinates (t along the bone, r around it); those with
+/// 0.05 ≤ t ≤ 0.95 (the limb, not the joint ends) are used;
 /// r is reduced by the vertex's σ (the deviation that gave its clothness); a weighted linear
 /// regression r(t) = ra + (rb − ra) t with weights 1/(σ + ε) gives the radii; radii are then
-/// shrunk until no body vertex (clothness < 0.5) is deeper inside than `max_penetration`, and
-/// averaged at joints and over left/right pairs.
+/// averaged at joints joining exactly two fitted bones and over left/right pairs, and finally
+/// shrunk until no body vertex (clothness < 0.5) lies deeper inside than `max_penetration`.
 /// \param V, F first pose of the reference (rest pose of the skeleton).
 /// \param sigma per-vertex deviation (ClothSegmentation), same units as V; empty = zeros.
 /// \param clothness per-vertex δ in [0,1]; empty = zeros.
