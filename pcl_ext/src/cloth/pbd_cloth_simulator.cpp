@@ -200,7 +200,7 @@ void PbdClothSimulator::step(const Eigen::MatrixX3d& targets_in, const std::vect
     for (std::size_t i = 0; i < n; ++i) {
       pred_[i] = inv_mass_[i] != 0 ? Eigen::Vector3d(pos_[i] + T * vel_[i] + 0.5 * T * T * settings_.gravity)
                                    : Eigen::Vector3d(targets.row(Eigen::Index(i)).transpose());
-      travel = std::max(travel, (pred_[i] - pos_[i]).norm());
+      if (inv_mass_[i] != 0) travel = std::max(travel, (pred_[i] - pos_[i]).norm());
     }
     findProxyCandidates(proxies_prev_, proxies, travel);
     findSelfContacts(travel);
