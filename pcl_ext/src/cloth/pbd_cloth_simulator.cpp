@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
+#include <queue>
 #include <string>
 
 #include "tbsp/core/error.h"
@@ -42,6 +44,11 @@ std::vector<std::vector<int>> greedy_colouring(int num_constraints, Eigen::Index
   }
   if (!serial.empty()) colours.push_back(serial);  // conflicts allowed: projected by one thread
   return colours;
+}
+
+std::size_t conflict_colour(const std::vector<std::vector<int>>& colours) {
+  // greedy_colouring appends the conflicting constraints after 128 colours
+  return colours.size() > 128 ? colours.size() - 1 : std::size_t(-1);
 }
 
 double dihedral(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& p2, const Eigen::Vector3d& p3) {
@@ -101,6 +108,48 @@ void PbdClothSimulator::buildColours() {
     const auto& b = bend_[std::size_t(c)];
     return std::vector<int>{b.a, b.b, b.c, b.d};
   });
+  stretch_conflict_colour_ = conflict_colour(stretch_colours_);
+  bend_conflict_colour_ = conflict_colour(bend_colours_);
+}
+
+void PbdClothSimulator::buildTethers() {
+  // multi-source Dijkstra over the edges of the rest mesh from every kinematic vertex
+  const std::size_t n = std::size_t(rest_.rows());
+  tether_anchor_.assign(n, -1);
+  tether_length_.assign(n, std::numeric_limits<double>::infinity());
+  tethers_dirty_ = false;
+  if (!settings_.tethers) return;
+  std::vector<std::vector<std::pair<int, double>>> adj(n);
+  for (const auto& e : stretch_) {
+    adj[std::size_t(e.a)].emplace_back(e.b, e.rest);
+    adj[std::size_t(e.b)].emplace_back(e.a, e.rest);
+  }
+  using Item = std::pair<double, int>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
+  for (std::size_t i = 0; i < n; ++i)
+    if (delta_(Eigen::Index(i)) == 0) {
+      tether_anchor_[i] = int(i);
+      tether_length_[i] = 0;
+      queue.emplace(0.0, int(i));
+    }
+  while (!queue.empty()) {
+    const auto [d, v] = queue.top();
+    queue.pop();
+    if (d > tether_length_[std::size_t(v)]) continue;
+    for (const auto& [w, len] : adj[std::size_t(v)]) {
+      const double nd = d + len;
+      if (nd < tether_length_[std::size_t(w)] ||
+          (nd == tether_length_[std::size_t(w)] && tether_anchor_[std::size_t(v)] < tether_anchor_[std::size_t(w)])) {
+        tether_length_[std::size_t(w)] = nd;
+        tether_anchor_[std::size_t(w)] = tether_anchor_[std::size_t(v)];
+        queue.emplace(nd, w);
+      }
+    }
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (tether_anchor_[i] == int(i)) tether_anchor_[i] = -1;  // kinematic vertices need none
+    tether_length_[i] *= 1 + settings_.tether_slack;
+  }
 }
 
 void PbdClothSimulator::setClothness(const Eigen::VectorXd& delta) {
@@ -113,6 +162,7 @@ void PbdClothSimulator::setClothness(const Eigen::VectorXd& delta) {
                          std::to_string(delta(i)) + ", expected a value in [0, 1]");
   delta_ = delta;
   k_blend_.clear();
+  tethers_dirty_ = true;
 }
 
 void PbdClothSimulator::setRegions(const Eigen::VectorXi& region) {
@@ -144,9 +194,12 @@ void PbdClothSimulator::setSettings(const PbdSettings& s) {
   if (!(s.drag_constant >= 0) || !(s.drag_unit > 0)) bad("drag_constant must be ≥ 0 and drag_unit > 0");
   if (!(s.k_stretch >= 0 && s.k_stretch <= 1)) bad("k_stretch must be in [0, 1]");
   if (!(s.thickness >= 0)) bad("thickness must be ≥ 0");
+  if (s.contact_interval < 1 || s.contact_interval > 64) bad("contact_interval must be in 1..64");
+  if (!(s.tether_slack >= 0 && s.tether_slack <= 1)) bad("tether_slack must be in [0, 1]");
   if (!(s.friction >= 0 && s.friction <= 2) || !(s.restitution >= 0 && s.restitution <= 1))
     bad("friction must be in [0, 2] and restitution in [0, 1]");
   settings_ = s;
+  tethers_dirty_ = true;
   for (auto& b : bend_)
     b.rest = s.flat_rest_angle ? 0.0 : dihedral(rest_.row(b.c).transpose(), rest_.row(b.d).transpose(), rest_.row(b.a).transpose(),
                                                  rest_.row(b.b).transpose());
@@ -190,23 +243,31 @@ void PbdClothSimulator::step(const Eigen::MatrixX3d& targets_in, const std::vect
     }
     return sub;
   };
-  // contacts are searched once per frame, within the distance a vertex can travel in it
-  {
-    const std::size_t n = pos_.size();
-    inv_mass_.resize(n);
-    for (std::size_t i = 0; i < n; ++i) inv_mass_[i] = delta_(Eigen::Index(i)) > 0 ? 1.0 / mass_(Eigen::Index(i)) : 0.0;
-    const double T = settings_.time_step;
-    double travel = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      pred_[i] = inv_mass_[i] != 0 ? Eigen::Vector3d(pos_[i] + T * vel_[i] + 0.5 * T * T * settings_.gravity)
-                                   : Eigen::Vector3d(targets.row(Eigen::Index(i)).transpose());
-      if (inv_mass_[i] != 0) travel = std::max(travel, (pred_[i] - pos_[i]).norm());
-    }
-    findProxyCandidates(proxies_prev_, proxies, travel);
-    findSelfContacts(travel);
-  }
+  const std::size_t n = pos_.size();
+  inv_mass_.resize(n);
+  for (std::size_t i = 0; i < n; ++i) inv_mass_[i] = delta_(Eigen::Index(i)) > 0 ? 1.0 / mass_(Eigen::Index(i)) : 0.0;
+  if (tethers_dirty_) buildTethers();
+  const int interval = settings_.contact_interval;
   for (int s = 0; s < ns; ++s) {
     const double t0 = double(s) / ns, t1 = double(s + 1) / ns;
+    if (s % interval == 0) {
+      // contacts for the next `window` sub-steps, within the distance a vertex can travel in them
+      const int window = std::min(interval, ns - s);
+      const double T = window * dt;
+      std::vector<double> travel(n);
+      double vmax = 0;
+      const double fall = 0.5 * settings_.gravity.norm() * T * T;
+      for (std::size_t i = 0; i < n; ++i) {
+        if (inv_mass_[i] != 0) {
+          travel[i] = vel_[i].norm() * T + fall;
+          vmax = std::max(vmax, travel[i]);
+        } else {
+          travel[i] = (targets.row(Eigen::Index(i)).transpose() - pos_[i]).norm();
+        }
+      }
+      findProxyCandidates(lerp(t0), lerp(double(s + window) / ns), vmax);
+      findSelfContacts(travel);
+    }
     substep(targets, lerp(t0), lerp(t1), t1, dt);
   }
   targets_prev_ = targets;
@@ -236,6 +297,18 @@ double PbdClothSimulator::potentialEnergy() const {
   for (Eigen::Index i = 0; i < x_.rows(); ++i)
     if (delta_(i) > 0) e -= mass_(i) * settings_.gravity.dot(x_.row(i).transpose());
   return e;
+}
+
+double PbdClothSimulator::strainQuantile(double q) const {
+  if (stretch_.empty()) return 0;
+  std::vector<double> e;
+  e.reserve(stretch_.size());
+  for (const auto& s : stretch_)
+    if (s.rest > 0) e.push_back(std::abs((pos_[std::size_t(s.a)] - pos_[std::size_t(s.b)]).norm() / s.rest - 1));
+  if (e.empty()) return 0;
+  const std::size_t k = std::min(e.size() - 1, std::size_t(std::clamp(q, 0.0, 1.0) * double(e.size() - 1)));
+  std::nth_element(e.begin(), e.begin() + std::ptrdiff_t(k), e.end());
+  return e[k];
 }
 
 double PbdClothSimulator::maxStrain() const {

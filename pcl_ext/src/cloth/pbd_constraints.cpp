@@ -13,12 +13,20 @@ namespace {
 // (Müller et al. 2007, §3.3): 1 − (1 − k)^(1/n).
 double per_iteration(double k, int n) { return k >= 1 ? 1.0 : 1.0 - std::pow(1.0 - k, 1.0 / n); }
 
+// acos to within 7e-5 rad (Abramowitz & Stegun 4.4.45; relative error 5e-5 for the small
+// angles of nearly flat cloth): libm's acos was a fifth of the simulation time.
+inline double fast_acos(double x) {
+  const double a = std::abs(x);
+  const double r = std::sqrt(1.0 - a) * (1.5707288 + a * (-0.2121144 + a * (0.0742610 - 0.0187293 * a)));
+  return x >= 0 ? r : M_PI - r;
+}
+
 // Largest bending stiffness of one sweep: the linearised dihedral projection overshoots and
 // can diverge at full stiffness (k_bend = 1 would give 1 per sweep).
 constexpr double kMaxBendSweep = 0.5;
 
-// Parallel only when a sweep is large enough to pay for the barrier.
-constexpr std::size_t kParallelMin = 2048;
+// The sweeps run on several threads only for meshes large enough to pay for the barriers.
+constexpr std::size_t kParallelMin = 1024;
 
 }  // namespace
 
@@ -77,85 +85,108 @@ void PbdClothSimulator::findProxyCandidates(const std::vector<RoundCone>& prev, 
   proxy_offsets_[n] = int(proxy_pairs_.size());
 }
 
-void PbdClothSimulator::findSelfContacts(double travel) {
+void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
   self_pairs_.clear();
   const double s = 2 * settings_.thickness;
   if (!settings_.self_collision || s <= 0) return;
   const std::size_t n = pos_.size();
-  // vertices that can come within s of each other during the frame: distance < s + 2·travel.
-  // Sorted by grid cell (cell size = that reach); the 27 neighbouring cells by binary search.
-  const double reach = s + 2 * travel;
-  auto cell = [&](const Eigen::Vector3d& p) {
-    return Eigen::Vector3i(int(std::floor(p.x() / reach)), int(std::floor(p.y() / reach)), int(std::floor(p.z() / reach)));
+  // Two vertices can touch during the window only if |x_i − x_j| < s + travel_i + travel_j. Each
+  // pair is found by its faster vertex, which searches s + 2·travel (≥ that bound) and accepts
+  // only slower partners, so one fast vertex does not widen everybody's search.
+  std::vector<double> sorted_travel(travel);
+  std::nth_element(sorted_travel.begin(), sorted_travel.begin() + std::ptrdiff_t(n * 9 / 10), sorted_travel.end());
+  const double cell = s + 2 * sorted_travel[n * 9 / 10];
+  // hashed uniform grid, counting sort: bucket b holds its vertices in increasing index order
+  std::size_t buckets = 1;
+  while (buckets < 2 * n) buckets <<= 1;
+  auto coord = [&](const Eigen::Vector3d& p) {
+    return Eigen::Vector3i(int(std::floor(p.x() / cell)), int(std::floor(p.y() / cell)), int(std::floor(p.z() / cell)));
   };
-  auto key = [](const Eigen::Vector3i& c) {
-    const auto u = [](int v) { return std::uint64_t(std::uint32_t(v + (1 << 20)) & 0x1FFFFF); };
-    return (u(c.x()) << 42) | (u(c.y()) << 21) | u(c.z());
+  auto hash = [&](const Eigen::Vector3i& c) {
+    return (std::size_t(std::uint32_t(c.x()) * 73856093u) ^ std::size_t(std::uint32_t(c.y()) * 19349663u) ^
+            std::size_t(std::uint32_t(c.z()) * 83492791u)) & (buckets - 1);
   };
-  std::vector<std::pair<std::uint64_t, int>> sorted(n);
-  for (std::size_t i = 0; i < n; ++i) sorted[i] = {key(cell(pos_[i])), int(i)};
-  std::sort(sorted.begin(), sorted.end());
+  std::vector<Eigen::Vector3i> cells(n);
+  std::vector<int> start(buckets + 1, 0), entries(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    cells[i] = coord(pos_[i]);
+    ++start[hash(cells[i]) + 1];
+  }
+  for (std::size_t b = 0; b < buckets; ++b) start[b + 1] += start[b];
+  {
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (std::size_t i = 0; i < n; ++i) entries[std::size_t(fill[hash(cells[i])]++)] = int(i);
+  }
   const double exclude = 2 * s;  // rest neighbours closer than this are not contacts
   for (std::size_t i = 0; i < n; ++i) {
-    if (inv_mass_[i] == 0) continue;
-    const Eigen::Vector3i c = cell(pos_[i]);
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) {
-          const std::uint64_t k = key(c + Eigen::Vector3i(dx, dy, dz));
-          auto lo = std::lower_bound(sorted.begin(), sorted.end(), std::make_pair(k, -1));
-          for (; lo != sorted.end() && lo->first == k; ++lo) {
-            const std::size_t j = std::size_t(lo->second);
-            if (j == i || (inv_mass_[j] != 0 && j < i)) continue;  // each simulated pair once
+    const double reach = s + 2 * travel[i];
+    const int range = std::max(1, int(std::ceil(reach / cell)));
+    const Eigen::Vector3i& c = cells[i];
+    for (int dx = -range; dx <= range; ++dx)
+      for (int dy = -range; dy <= range; ++dy)
+        for (int dz = -range; dz <= range; ++dz) {
+          const Eigen::Vector3i cc = c + Eigen::Vector3i(dx, dy, dz);
+          const std::size_t h = hash(cc);
+          for (int q = start[h]; q < start[h + 1]; ++q) {
+            const std::size_t j = std::size_t(entries[std::size_t(q)]);
+            if (j == i || cells[j] != cc) continue;
+            if (travel[j] > travel[i] || (travel[j] == travel[i] && j > i)) continue;  // found from j
+            if (inv_mass_[i] == 0 && inv_mass_[j] == 0) continue;
             if ((pos_[i] - pos_[j]).squaredNorm() > reach * reach) continue;
             if ((rest_.row(Eigen::Index(i)) - rest_.row(Eigen::Index(j))).squaredNorm() < exclude * exclude) continue;
-            self_pairs_.emplace_back(int(i), int(j));
+            self_pairs_.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
           }
         }
   }
-  std::sort(self_pairs_.begin(), self_pairs_.end());
 }
 
+// The projections below run inside the sweep's parallel region (substep): each `omp for` splits
+// one colour over the threads (static schedule: the same split every time) and ends in a barrier;
+// outside a parallel region they run serially. Colours share no vertex, so the result does not
+// depend on the thread count.
 void PbdClothSimulator::projectStretch(double k) {
-  for (const auto& colour : stretch_colours_) {
-    const bool serial = &colour == &stretch_colours_.back() && stretch_colours_.size() > 128;
-#pragma omp parallel for schedule(static) if (!serial && colour.size() >= kParallelMin)
-    for (std::size_t q = 0; q < colour.size(); ++q) {
-      const Stretch& c = stretch_[std::size_t(colour[q])];
-      const double wa = inv_mass_[std::size_t(c.a)], wb = inv_mass_[std::size_t(c.b)];
-      if (wa + wb == 0) continue;
-      Eigen::Vector3d& pa = pred_[std::size_t(c.a)];
-      Eigen::Vector3d& pb = pred_[std::size_t(c.b)];
-      const Eigen::Vector3d d = pa - pb;
-      const double len = d.norm();
-      if (len < 1e-12) continue;
-      const Eigen::Vector3d corr = (k * (len - c.rest) / ((wa + wb) * len)) * d;
-      pa -= wa * corr;
-      pb += wb * corr;
+  auto one = [&](int index) {
+    const Stretch& c = stretch_[std::size_t(index)];
+    const double wa = inv_mass_[std::size_t(c.a)], wb = inv_mass_[std::size_t(c.b)];
+    if (wa + wb == 0) return;
+    Eigen::Vector3d& pa = pred_[std::size_t(c.a)];
+    Eigen::Vector3d& pb = pred_[std::size_t(c.b)];
+    const Eigen::Vector3d d = pa - pb;
+    const double len = d.norm();
+    if (len < 1e-12) return;
+    const Eigen::Vector3d corr = (k * (len - c.rest) / ((wa + wb) * len)) * d;
+    pa -= wa * corr;
+    pb += wb * corr;
+  };
+  for (std::size_t ci = 0; ci < stretch_colours_.size(); ++ci) {
+    const auto& colour = stretch_colours_[ci];
+    if (ci == stretch_conflict_colour_) {
+#pragma omp single
+      for (int q : colour) one(q);
+    } else {
+#pragma omp for schedule(static)
+      for (std::size_t q = 0; q < colour.size(); ++q) one(colour[q]);
     }
   }
 }
 
 void PbdClothSimulator::projectBend(const std::vector<double>& kr) {
-  for (const auto& colour : bend_colours_) {
-    const bool serial = &colour == &bend_colours_.back() && bend_colours_.size() > 128;
-#pragma omp parallel for schedule(static) if (!serial && colour.size() >= kParallelMin)
-    for (std::size_t q = 0; q < colour.size(); ++q) {
-      const Bend& c = bend_[std::size_t(colour[q])];
+  auto one = [&](int index) {
+      const Bend& c = bend_[std::size_t(index)];
       const double k = kr[std::size_t(c.region)];
-      if (k == 0) continue;
+      if (k == 0) return;
       // Bender's PBD dihedral constraint (gradients of Bridson et al. 2003): p2-p3 the edge,
       // p0 and p1 the wings; φ = acos(n1·n2), C = φ − φ_rest (eq. 10.3)
       const std::size_t i0 = std::size_t(c.c), i1 = std::size_t(c.d), i2 = std::size_t(c.a), i3 = std::size_t(c.b);
       const double w0 = inv_mass_[i0], w1 = inv_mass_[i1], w2 = inv_mass_[i2], w3 = inv_mass_[i3];
-      if (w0 + w1 + w2 + w3 == 0) continue;
+      if (w0 + w1 + w2 + w3 == 0) return;
       const Eigen::Vector3d &p0 = pred_[i0], &p1 = pred_[i1], &p2 = pred_[i2], &p3 = pred_[i3];
       const Eigen::Vector3d e = p3 - p2;
       const double elen = e.norm();
-      if (elen < 1e-12) continue;
+      if (elen < 1e-12) return;
       Eigen::Vector3d n1 = (p2 - p0).cross(p3 - p0), n2 = (p3 - p1).cross(p2 - p1);
       const double n1s = n1.squaredNorm(), n2s = n2.squaredNorm();
-      if (n1s < 1e-30 || n2s < 1e-30) continue;
+      if (n1s < 1e-30 || n2s < 1e-30) return;
       n1 /= n1s;
       n2 /= n2s;
       const Eigen::Vector3d d0 = elen * n1, d1 = elen * n2;
@@ -163,25 +194,47 @@ void PbdClothSimulator::projectBend(const std::vector<double>& kr) {
       const Eigen::Vector3d d3 = ((p2 - p0).dot(e) / elen) * n1 + ((p2 - p1).dot(e) / elen) * n2;
       // cos φ = N1·N2 / (|N1||N2|); here n = N/|N|², so |n1||n2| = 1/(|N1||N2|)
       const double cosphi = n1.dot(n2) / std::sqrt(n1.squaredNorm() * n2.squaredNorm());
-      const double phi = std::acos(std::clamp(cosphi, -1.0, 1.0));
+      const double phi = fast_acos(std::clamp(cosphi, -1.0, 1.0));
       double lambda = w0 * d0.squaredNorm() + w1 * d1.squaredNorm() + w2 * d2.squaredNorm() + w3 * d3.squaredNorm();
       // the free vertices cannot change the angle (e.g. only an edge vertex is free and the other
       // three are collinear): the linearised step would be unbounded
       const double wmax = std::max({w0, w1, w2, w3});
-      if (lambda <= 1e-6 * wmax * (d0.squaredNorm() + d1.squaredNorm() + d2.squaredNorm() + d3.squaredNorm())) continue;
+      if (lambda <= 1e-6 * wmax * (d0.squaredNorm() + d1.squaredNorm() + d2.squaredNorm() + d3.squaredNorm())) return;
       lambda = (phi - c.rest) / lambda * k;
       if (n1.cross(n2).dot(e) > 0) lambda = -lambda;
       pred_[i0] -= w0 * lambda * d0;
       pred_[i1] -= w1 * lambda * d1;
       pred_[i2] -= w2 * lambda * d2;
       pred_[i3] -= w3 * lambda * d3;
+  };
+  for (std::size_t ci = 0; ci < bend_colours_.size(); ++ci) {
+    const auto& colour = bend_colours_[ci];
+    if (ci == bend_conflict_colour_) {
+#pragma omp single
+      for (int q : colour) one(q);
+    } else {
+#pragma omp for schedule(static)
+      for (std::size_t q = 0; q < colour.size(); ++q) one(colour[q]);
     }
+  }
+}
+
+void PbdClothSimulator::projectTethers() {
+  if (!settings_.tethers) return;
+  const std::size_t n = pred_.size();
+#pragma omp for schedule(static)
+  for (std::size_t i = 0; i < n; ++i) {
+    const int a = tether_anchor_[i];
+    if (a < 0 || inv_mass_[i] == 0) continue;
+    const Eigen::Vector3d d = pred_[i] - pred_[std::size_t(a)];
+    const double len = d.norm();
+    if (len > tether_length_[i]) pred_[i] = pred_[std::size_t(a)] + (tether_length_[i] / len) * d;
   }
 }
 
 void PbdClothSimulator::projectBlend(const Points& targets, const std::vector<double>& k_blend) {
   const std::size_t n = pred_.size();
-#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+#pragma omp for schedule(static)
   for (std::size_t i = 0; i < n; ++i)
     if (inv_mass_[i] != 0 && k_blend[i] > 0) pred_[i] += k_blend[i] * (targets[i] - pred_[i]);
 }
@@ -190,7 +243,7 @@ void PbdClothSimulator::projectProxies(const std::vector<RoundCone>& prev, const
   if (proxy_pairs_.empty()) return;
   const std::size_t n = pred_.size();
   const double th = settings_.thickness, mu = settings_.friction;
-#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+#pragma omp for schedule(static)
   for (std::size_t i = 0; i < n; ++i)
     for (int q = proxy_offsets_[i]; q < proxy_offsets_[i + 1]; ++q) {
       const std::size_t k = std::size_t(proxy_pairs_[std::size_t(q)].second);
@@ -279,11 +332,14 @@ void PbdClothSimulator::substep(const Eigen::MatrixX3d& targets, const std::vect
   }
   const std::vector<double>& k_blend = k_blend_;
 
+#pragma omp parallel if (n >= kParallelMin)
   for (int iter = 0; iter < it; ++iter) {
     projectStretch(ks);
+    projectTethers();
     projectBend(kb);
     projectBlend(tgt, k_blend);
     projectProxies(prev, cur);
+#pragma omp single
     projectSelf();
   }
   int self = 0;

@@ -58,6 +58,15 @@ struct PbdSettings {
   double friction = 0.5;
   double restitution = 0.0;      ///< share of the normal velocity into a proxy that is reflected, [0, 1]
   bool self_collision = true;    ///< vertex–vertex self-collision via a spatial hash
+  /// Self-collision and proxy candidates are searched every this many sub-steps (within the
+  /// distance a vertex can travel meanwhile), 1..64. Default 4.
+  int contact_interval = 4;
+  /// Long-range attachments (Kim et al. 2012): each simulated vertex stays within its geodesic
+  /// rest distance (along edges, × (1 + tether_slack)) of the nearest kinematic (δ = 0) vertex.
+  /// Not in the thesis; bounds the stretch of long hanging cloth (a skirt from the waist) that
+  /// 16 sweeps alone cannot hold (docs/dev/cloth_experiments.md). Default true.
+  bool tethers = true;
+  double tether_slack = 0.02;    ///< [0, 1]
   /// Rest dihedral angle of the bending constraints: false (default) = the template's own angle,
   /// so a curved skirt keeps its shape; true = φ = 0 everywhere as in the thesis.
   bool flat_rest_angle = false;
@@ -107,6 +116,8 @@ public:
   double potentialEnergy() const;
   /// Largest relative edge strain |l / l₀ − 1| over all edges.
   double maxStrain() const;
+  /// The q-quantile (0..1) of the edge strains |l / l₀ − 1| (0.99: all but the worst 1 %).
+  double strainQuantile(double q) const;
   /// Vertex pairs in self-contact at the last step and vertex–proxy contacts.
   int numSelfContacts() const { return self_contacts_; }
   int numProxyContacts() const { return proxy_contacts_; }
@@ -120,8 +131,10 @@ private:
                double t1, double dt);
   void applyExternal(double dt);
   void findProxyCandidates(const std::vector<RoundCone>& proxies, const std::vector<RoundCone>& next, double reach);
-  void findSelfContacts(double reach);
+  void findSelfContacts(const std::vector<double>& travel);
   void projectStretch(double k);
+  void buildTethers();
+  void projectTethers();
   void projectBend(const std::vector<double>& k_per_region);
   void projectBlend(const Points& targets, const std::vector<double>& k_blend);
   void projectProxies(const std::vector<RoundCone>& prev, const std::vector<RoundCone>& cur);
@@ -144,6 +157,10 @@ private:
   std::vector<Stretch> stretch_;
   std::vector<Bend> bend_;
   std::vector<std::vector<int>> stretch_colours_, bend_colours_;
+  std::size_t stretch_conflict_colour_ = std::size_t(-1), bend_conflict_colour_ = std::size_t(-1);  // swept by one thread
+  std::vector<int> tether_anchor_;     // nearest kinematic vertex (-1: none)
+  std::vector<double> tether_length_;  // its geodesic rest distance × (1 + slack)
+  bool tethers_dirty_ = true;
   std::vector<std::pair<int, int>> self_pairs_;
   std::vector<std::pair<int, int>> proxy_pairs_;  // (vertex, proxy) candidates, sorted by vertex
   std::vector<int> proxy_offsets_;                // vertex v's candidates: [offsets[v], offsets[v+1])
