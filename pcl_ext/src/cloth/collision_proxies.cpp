@@ -160,23 +160,49 @@ std::vector<CollisionProxy> fit_collision_proxies(const Eigen::MatrixX3d& V, con
   const double eps = 1e-3 * diag;
   for (int b = 0; b < nb; ++b) {
     if (!selected(bones[std::size_t(b)])) continue;
-    // weighted linear regression of r − σ on t over the bone's vertices that project inside it
-    Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
-    Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
-    int count = 0;
+    // weighted linear regression of r − σ on t over the bone's vertices, made robust by
+    // iteratively reweighted least squares (Tukey's biweight on the residuals, scale from their
+    // median absolute deviation): vertices of other body parts that happen to lie nearest this
+    // bone (inner surfaces, a neighbouring limb) do not pull the cone in
+    // Where the bone has enough body vertices (clothness < 0.5), they are the proxy's surface;
+    // only a bone hidden under cloth is fitted to its cloth vertices moved in by σ.
+    int body_count = 0;
+    for (Eigen::Index i = 0; i < n; ++i)
+      body_count += nearest[std::size_t(i)] == b && cloth(i) < 0.5 && tpar[std::size_t(i)] >= kSideLo && tpar[std::size_t(i)] <= kSideHi;
+    const bool body_only = body_count >= o.min_vertices;
+    std::vector<double> ts, rs, ws;
     for (Eigen::Index i = 0; i < n; ++i) {
       if (nearest[std::size_t(i)] != b) continue;
       const double t = tpar[std::size_t(i)];
       if (t < kSideLo || t > kSideHi) continue;
-      const double wgt = 1.0 / (sigma(i) + eps);
-      const double r = std::max(0.0, rad[std::size_t(i)] - sigma(i));
-      const Eigen::Vector2d x(1.0, t);
-      A += wgt * x * x.transpose();
-      rhs += wgt * r * x;
-      ++count;
+      if (body_only && cloth(i) >= 0.5) continue;
+      ts.push_back(t);
+      rs.push_back(std::max(0.0, rad[std::size_t(i)] - sigma(i)));
+      ws.push_back(1.0 / (sigma(i) + eps));
     }
+    const int count = int(ts.size());
     if (count < o.min_vertices) continue;
-    const Eigen::Vector2d coef = A.ldlt().solve(rhs);
+    std::vector<double> robust(ts.size(), 1.0);
+    Eigen::Vector2d coef = Eigen::Vector2d::Zero();
+    for (int iter = 0; iter < 8; ++iter) {
+      Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
+      Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
+      for (std::size_t q = 0; q < ts.size(); ++q) {
+        const Eigen::Vector2d x(1.0, ts[q]);
+        A += ws[q] * robust[q] * x * x.transpose();
+        rhs += ws[q] * robust[q] * rs[q] * x;
+      }
+      coef = A.ldlt().solve(rhs);
+      std::vector<double> res(ts.size());
+      for (std::size_t q = 0; q < ts.size(); ++q) res[q] = std::abs(rs[q] - coef(0) - coef(1) * ts[q]);
+      std::vector<double> sorted = res;
+      std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2), sorted.end());
+      const double scale = std::max(1.4826 * sorted[sorted.size() / 2], 1e-4 * diag);
+      for (std::size_t q = 0; q < ts.size(); ++q) {
+        const double u = res[q] / (4.685 * scale);
+        robust[q] = u < 1 ? (1 - u * u) * (1 - u * u) : 0.0;
+      }
+    }
     CollisionProxy p;
     p.bone = bones[std::size_t(b)];
     p.cone.a = skeleton.restPosition(p.bone.joint);
@@ -226,20 +252,27 @@ std::vector<CollisionProxy> fit_collision_proxies(const Eigen::MatrixX3d& V, con
   for (std::size_t k = 0; k < out.size(); ++k) {
     auto& p = out[k];
     const int b = out_bone[k];
-    double depth = 0;
+    // shrink the end nearer each violating vertex until 99 % of the body vertices are within
+    // the allowed depth (at most 50 rounds)
+    std::vector<std::pair<double, double>> body;  // (t, r)
     for (Eigen::Index i = 0; i < n; ++i) {
       const double t = tpar[std::size_t(i)];
       if (nearest[std::size_t(i)] != b || cloth(i) >= 0.5 || t < kSideLo || t > kSideHi) continue;
-      depth = std::max(depth, p.cone.ra + (p.cone.rb - p.cone.ra) * t - rad[std::size_t(i)]);
+      body.emplace_back(t, rad[std::size_t(i)]);
     }
-    const double allowed = o.max_penetration * 0.5 * (p.cone.ra + p.cone.rb);
-    if (depth > allowed) {
-      const double shrink = depth - allowed;
-      p.cone.ra = std::max(0.0, p.cone.ra - shrink);
-      p.cone.rb = std::max(0.0, p.cone.rb - shrink);
-      depth = allowed;
+    double worst = 0;
+    for (int round = 0; round < 50 && !body.empty(); ++round) {
+      const double allowed = o.max_penetration * 0.5 * (p.cone.ra + p.cone.rb);
+      std::vector<std::pair<double, double>> excess;  // (depth − allowed, t)
+      for (const auto& [t, r] : body) excess.emplace_back(p.cone.ra + (p.cone.rb - p.cone.ra) * t - r - allowed, t);
+      std::sort(excess.begin(), excess.end());
+      worst = std::max(0.0, excess.back().first + allowed);
+      const auto& [need, t] = excess[std::size_t(0.99 * double(excess.size() - 1))];
+      if (need <= 1e-12 * diag) break;
+      if (t < 0.5) p.cone.ra = std::max(0.0, p.cone.ra - need / (1 - t));
+      else p.cone.rb = std::max(0.0, p.cone.rb - need / t);
     }
-    p.penetration = depth;
+    p.penetration = std::max(0.0, worst);
   }
   return out;
 }

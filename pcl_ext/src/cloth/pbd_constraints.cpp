@@ -338,9 +338,9 @@ void PbdClothSimulator::substep(const Eigen::MatrixX3d& targets, const std::vect
     projectTethers();
     projectBend(kb);
     projectBlend(tgt, k_blend);
-    projectProxies(prev, cur);
 #pragma omp single
     projectSelf();
+    projectProxies(prev, cur);  // last: collisions with the body are hard constraints
   }
   int self = 0;
   const double s = 2 * settings_.thickness;

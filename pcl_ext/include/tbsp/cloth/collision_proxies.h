@@ -44,8 +44,8 @@ struct ProxyFitOptions {
   /// Bones whose joint names contain one of these (case-insensitive) get proxies; empty = every
   /// bone. Default: limbs and spine, the bones the thesis' skirts collide with.
   std::vector<std::string> joints = {};
-  /// Keep proxies inside the surface: body vertices (clothness < 0.5) may lie at most this far
-  /// inside the cone, as a fraction of the cone's mean radius. Default 0.02, range [0, 1].
+  /// Keep proxies inside the surface: 99 % of the body vertices (clothness < 0.5) may lie at most
+  /// this far inside the cone, as a fraction of the cone's mean radius. Default 0.02, range [0, 1].
   double max_penetration = 0.02;
   /// Average the radii at joints shared by consecutive bones and of left/right bone pairs
   /// (names equal after swapping Left/Right or L/R prefixes). Default true (thesis).
@@ -58,9 +58,11 @@ struct ProxyFitOptions {
 /// nearest bone and written in cylindrical coordinates (t along the bone, r around it); those with
 /// 0.05 ≤ t ≤ 0.95 (the limb, not the joint ends) are used;
 /// r is reduced by the vertex's σ (the deviation that gave its clothness); a weighted linear
-/// regression r(t) = ra + (rb − ra) t with weights 1/(σ + ε) gives the radii; radii are then
-/// averaged at joints joining exactly two fitted bones and over left/right pairs, and finally
-/// shrunk until no body vertex (clothness < 0.5) lies deeper inside than `max_penetration`.
+/// regression r(t) = ra + (rb − ra) t with weights 1/(σ + ε), made robust by iterative
+/// reweighting (Tukey biweight; vertices of other parts nearest the bone are outliers), gives the
+/// radii; radii are then averaged at joints joining exactly two fitted bones and over left/right
+/// pairs, and finally shrunk until 99 % of the bone's body vertices (clothness < 0.5) lie at most
+/// `max_penetration` inside (the largest depth is reported in CollisionProxy::penetration).
 /// \param V, F first pose of the reference (rest pose of the skeleton).
 /// \param sigma per-vertex deviation (ClothSegmentation), same units as V; empty = zeros.
 /// \param clothness per-vertex δ in [0,1]; empty = zeros.
