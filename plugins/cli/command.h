@@ -48,5 +48,6 @@ void add_stereo_commands(CLI::App& app, CommandTable& table);   // stereo, refin
 void add_animate_commands(CLI::App& app, CommandTable& table);  // animate
 void add_perf_capture_commands(CLI::App& app, CommandTable& table);  // capture
 void add_pipeline_commands(CLI::App& app, CommandTable& table);  // plugins, run
+void add_cloth_commands(CLI::App& app, CommandTable& table);     // cloth synth|segment|build|animate
 
 }  // namespace tbsp::cli

@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
   tbsp::cli::add_animate_commands(app, table);
   tbsp::cli::add_perf_capture_commands(app, table);
   tbsp::cli::add_pipeline_commands(app, table);
+  tbsp::cli::add_cloth_commands(app, table);
   tbsp::cli::add_demo_commands(app, table);
 
   CLI11_PARSE(app, argc, argv);

@@ -103,8 +103,12 @@ TEST(BoneHeat, TubeWeightsFollowTheBonesAndBendRigidlyAwayFromTheJoint) {
   for (int ring = 0; ring < 41; ring += 4) {
     const double x = ring / 40.0;
     const double w1 = W.coeff(ring * 24, 1);
-    if (x < 0.3) EXPECT_LT(w1, 0.02) << "x=" << x;
-    if (x > 0.7) EXPECT_GT(w1, 0.98) << "x=" << x;
+    if (x < 0.3) {
+      EXPECT_LT(w1, 0.02) << "x=" << x;
+    }
+    if (x > 0.7) {
+      EXPECT_GT(w1, 0.98) << "x=" << x;
+    }
     EXPECT_GE(w1, prev - 1e-9);
     prev = w1;
   }

@@ -23,6 +23,7 @@ void ClothSegmentation::setOptions(const ClothSegmentationOptions& o) {
     throw InvalidInput(std::string(kWhere) + "setOptions: need 0 ≤ t_rigid < t_cloth (got " + std::to_string(o.t_rigid) + ", " +
                        std::to_string(o.t_cloth) + ")");
   if (!(o.diffusion >= 0 && o.diffusion <= 1e4)) throw InvalidInput(std::string(kWhere) + "setOptions: diffusion must be in [0, 1e4]");
+  if (o.median_passes < 0 || o.median_passes > 10) throw InvalidInput(std::string(kWhere) + "setOptions: median_passes must be in 0..10");
   options_ = o;
 }
 
@@ -100,6 +101,25 @@ ClothSegmentation::Result ClothSegmentation::finish() const {
     r.raw(i) = std::clamp((r.sigma(i) - r.t_rigid) / (r.t_cloth - r.t_rigid), 0.0, 1.0);
     known(i) = 1;
   }
+  // robust first: `median_passes` one-ring median filters over the vertices with a hit remove
+  // isolated outliers (a ray that left through a hole in the scan and met a moving part)
+  Eigen::VectorXd data = r.raw;
+  if (options_.median_passes > 0) {
+    const std::vector<std::vector<int>> adj = vertex_adjacency(F_, n);
+    for (int pass = 0; pass < options_.median_passes; ++pass) {
+      Eigen::VectorXd next = data;
+      std::vector<double> vals;
+      for (Eigen::Index i = 0; i < n; ++i) {
+        if (!known(i)) continue;
+        vals.assign(1, data(i));
+        for (int j : adj[std::size_t(i)])
+          if (known(j)) vals.push_back(data(j));
+        std::nth_element(vals.begin(), vals.begin() + std::ptrdiff_t(vals.size() / 2), vals.end());
+        next(i) = vals[vals.size() / 2];
+      }
+      data = next;
+    }
+  }
   // diffusion: (M_known + τ (−C)) δ = M_known δ_raw with M the vertex areas; vertices without a
   // hit have no data term and are filled from their neighbours
   const Eigen::VectorXd area = voronoi_areas(V0_, F_);
@@ -117,13 +137,19 @@ ClothSegmentation::Result ClothSegmentation::finish() const {
   for (Eigen::Index i = 0; i < n; ++i) {
     const double m = known(i) ? std::max(area(i), 1e-9 * mean_area) : 0.0;
     A.coeffRef(i, i) += m;
-    if (known(i)) rhs(i) = m * r.raw(i), comp_known[std::size_t(comp(i))] = 1;
+    if (known(i)) rhs(i) = m * data(i), comp_known[std::size_t(comp(i))] = 1;
   }
   for (Eigen::Index i = 0; i < n; ++i)  // a component without any hit: δ = 0 there
     if (!comp_known[std::size_t(comp(i))]) A.coeffRef(i, i) += std::max(area(i), 1e-9 * mean_area);
   SparseCholesky solver;
   solver.compute(A);
   r.clothness = solver.solve(rhs).col(0).cwiseMax(0.0).cwiseMin(1.0);
+  // the diffusion leaves faint tails: below 0.01 a vertex is body (skinned only, no simulation
+  // cost), above 0.99 fully cloth
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (r.clothness(i) < 0.01) r.clothness(i) = 0;
+    if (r.clothness(i) > 0.99) r.clothness(i) = 1;
+  }
   return r;
 }
 

@@ -101,13 +101,27 @@ void PbdClothSimulator::setMesh(const Eigen::MatrixX3d& V, const Eigen::MatrixX3
 }
 
 void PbdClothSimulator::buildColours() {
-  stretch_colours_ = greedy_colouring(int(stretch_.size()), rest_.rows(), [&](int c) {
-    return std::vector<int>{stretch_[std::size_t(c)].a, stretch_[std::size_t(c)].b};
-  });
-  bend_colours_ = greedy_colouring(int(bend_.size()), rest_.rows(), [&](int c) {
+  // only constraints that can move a vertex (one of theirs is simulated, δ > 0) are swept: a body
+  // with a skirt spends no time on the skinned part
+  auto sim = [&](int v) { return delta_(v) > 0; };
+  std::vector<int> st, bd;
+  for (int c = 0; c < int(stretch_.size()); ++c)
+    if (sim(stretch_[std::size_t(c)].a) || sim(stretch_[std::size_t(c)].b)) st.push_back(c);
+  for (int c = 0; c < int(bend_.size()); ++c) {
     const auto& b = bend_[std::size_t(c)];
+    if (sim(b.a) || sim(b.b) || sim(b.c) || sim(b.d)) bd.push_back(c);
+  }
+  stretch_colours_ = greedy_colouring(int(st.size()), rest_.rows(), [&](int c) {
+    return std::vector<int>{stretch_[std::size_t(st[std::size_t(c)])].a, stretch_[std::size_t(st[std::size_t(c)])].b};
+  });
+  for (auto& colour : stretch_colours_)
+    for (int& c : colour) c = st[std::size_t(c)];
+  bend_colours_ = greedy_colouring(int(bd.size()), rest_.rows(), [&](int c) {
+    const auto& b = bend_[std::size_t(bd[std::size_t(c)])];
     return std::vector<int>{b.a, b.b, b.c, b.d};
   });
+  for (auto& colour : bend_colours_)
+    for (int& c : colour) c = bd[std::size_t(c)];
   stretch_conflict_colour_ = conflict_colour(stretch_colours_);
   bend_conflict_colour_ = conflict_colour(bend_colours_);
 }
@@ -127,7 +141,7 @@ void PbdClothSimulator::buildTethers() {
   using Item = std::pair<double, int>;
   std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
   for (std::size_t i = 0; i < n; ++i)
-    if (delta_(Eigen::Index(i)) == 0) {
+    if (delta_(Eigen::Index(i)) <= 0.5) {  // mostly skinned: held near its skinned position
       tether_anchor_[i] = int(i);
       tether_length_[i] = 0;
       queue.emplace(0.0, int(i));
@@ -147,7 +161,7 @@ void PbdClothSimulator::buildTethers() {
     }
   }
   for (std::size_t i = 0; i < n; ++i) {
-    if (tether_anchor_[i] == int(i)) tether_anchor_[i] = -1;  // kinematic vertices need none
+    if (tether_anchor_[i] == int(i)) tether_anchor_[i] = -1;  // anchors need none
     tether_length_[i] *= 1 + settings_.tether_slack;
   }
 }
@@ -163,6 +177,7 @@ void PbdClothSimulator::setClothness(const Eigen::VectorXd& delta) {
   delta_ = delta;
   k_blend_.clear();
   tethers_dirty_ = true;
+  buildColours();
 }
 
 void PbdClothSimulator::setRegions(const Eigen::VectorXi& region) {
@@ -304,7 +319,8 @@ double PbdClothSimulator::strainQuantile(double q) const {
   std::vector<double> e;
   e.reserve(stretch_.size());
   for (const auto& s : stretch_)
-    if (s.rest > 0) e.push_back(std::abs((pos_[std::size_t(s.a)] - pos_[std::size_t(s.b)]).norm() / s.rest - 1));
+    if (s.rest > 0 && delta_(s.a) > 0 && delta_(s.b) > 0)
+      e.push_back(std::abs((pos_[std::size_t(s.a)] - pos_[std::size_t(s.b)]).norm() / s.rest - 1));
   if (e.empty()) return 0;
   const std::size_t k = std::min(e.size() - 1, std::size_t(std::clamp(q, 0.0, 1.0) * double(e.size() - 1)));
   std::nth_element(e.begin(), e.begin() + std::ptrdiff_t(k), e.end());
@@ -314,7 +330,8 @@ double PbdClothSimulator::strainQuantile(double q) const {
 double PbdClothSimulator::maxStrain() const {
   double m = 0;
   for (const auto& s : stretch_)
-    if (s.rest > 0) m = std::max(m, std::abs((pos_[std::size_t(s.a)] - pos_[std::size_t(s.b)]).norm() / s.rest - 1));
+    if (s.rest > 0 && delta_(s.a) > 0 && delta_(s.b) > 0)
+      m = std::max(m, std::abs((pos_[std::size_t(s.a)] - pos_[std::size_t(s.b)]).norm() / s.rest - 1));
   return m;
 }
 

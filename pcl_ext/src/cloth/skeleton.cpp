@@ -137,20 +137,29 @@ SkinningWeights bone_heat_weights(const Eigen::MatrixX3d& V, const Eigen::Matrix
     for (int b : heated) P(i, b) = 1.0 / double(heated.size());
   }
 
-  // every component needs heat somewhere
+  // A component no bone can see (an open layer of cloth around the body, a mesh around a
+  // skeleton placed outside it) is heated from its nearest bones without the visibility test.
   Eigen::VectorXi comp;
   const int ncomp = connected_components(F, n, comp);
   std::vector<char> heated_comp(std::size_t(ncomp), 0);
   for (Eigen::Index i = 0; i < n; ++i)
     if (heat(i) > 0) heated_comp[std::size_t(comp(i))] = 1;
-  for (int k = 0; k < ncomp; ++k)
-    if (!heated_comp[std::size_t(k)]) {
-      bool has_face = false;
-      for (Eigen::Index f = 0; f < F.rows() && !has_face; ++f) has_face = comp(F(f, 0)) == k;
-      if (has_face)
-        throw InvalidInput("[tbsp::bone_heat_weights] a connected part of the mesh (component " + std::to_string(k) +
-                           ") cannot see any bone: place the skeleton inside the mesh, or pass visibility = false");
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (heated_comp[std::size_t(comp(i))]) continue;
+    const Eigen::Vector3d p = V.row(i).transpose();
+    double dmin = std::numeric_limits<double>::infinity();
+    std::vector<double> d(static_cast<std::size_t>(nb));
+    for (int b = 0; b < nb; ++b) {
+      d[std::size_t(b)] = segment_distance(p, skeleton.restPosition(bones[std::size_t(b)].joint),
+                                           skeleton.restPosition(bones[std::size_t(b)].child), nullptr);
+      dmin = std::min(dmin, d[std::size_t(b)]);
     }
+    int ties = 0;
+    for (int b = 0; b < nb; ++b) ties += d[std::size_t(b)] <= o.tie_factor * dmin + 1e-12 * diag;
+    for (int b = 0; b < nb; ++b) P(i, b) = d[std::size_t(b)] <= o.tie_factor * dmin + 1e-12 * diag ? 1.0 / ties : 0.0;
+    const double dd = std::max(dmin, 1e-6 * diag);
+    heat(i) = o.heat / (dd * dd);
+  }
 
   const Eigen::SparseMatrix<double> C = cotangent_matrix(V, F);
   const Eigen::VectorXd M = voronoi_areas(V, F);

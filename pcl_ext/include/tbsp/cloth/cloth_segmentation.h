@@ -6,8 +6,9 @@
 /// For every vertex v_i of the first frame a ray is shot along −n_i to the opposite surface; the
 /// hit p_i is kept in barycentric coordinates of its face. Over the sequence the standard
 /// deviation σ_i of |v_i − p_i| measures how much the cross-section through v_i changes; the
-/// clothness is δ_i = clamp((σ_i − t_rigid) / (t_cloth − t_rigid), 0, 1) (eq. 10.1), then
-/// diffused on the surface (which also fills vertices whose ray found no opposite surface).
+/// clothness is δ_i = clamp((σ_i − t_rigid) / (t_cloth − t_rigid), 0, 1) (eq. 10.1), cleaned by
+/// one-ring median filters, then diffused on the surface (which also fills vertices whose ray
+/// found no opposite surface).
 ///
 /// \code
 /// tbsp::ClothSegmentation seg;
@@ -29,6 +30,9 @@ struct ClothSegmentationOptions {
   /// t_cloth of eq. 10.1, same unit: σ above it is fully cloth (δ = 1). Default 0.008 (16 mm on a
   /// 2 m person).
   double t_cloth = 0.008;
+  /// One-ring median filters of eq. 10.1's values before the diffusion (0 = none), 0..10.
+  /// Default 2: removes isolated vertices whose ray left through a hole and met a moving part.
+  int median_passes = 2;
   /// Diffusion of δ on the surface: implicit heat step of time `diffusion` · (mean edge length)²
   /// (0 = none, only vertices without a ray hit are filled harmonically). Default 2, range [0, 1e4].
   double diffusion = 2.0;
@@ -39,7 +43,7 @@ public:
   struct Result {
     Eigen::VectorXd sigma;      ///< σ_i, units of V; NaN where the ray found no opposite surface
     Eigen::VectorXd raw;        ///< eq. 10.1 before diffusion (NaN where no hit)
-    Eigen::VectorXd clothness;  ///< δ_i ∈ [0, 1] after diffusion
+    Eigen::VectorXd clothness;  ///< δ_i ∈ [0, 1] after diffusion; values below 0.01 are 0, above 0.99 are 1
     Eigen::VectorXi opposite_face;  ///< face hit by vertex i's ray in frame 1 (-1: none)
     Eigen::MatrixX3d opposite_bary; ///< barycentric coordinates of the hit
     int frames = 0;             ///< frames accumulated (frame 1 included)

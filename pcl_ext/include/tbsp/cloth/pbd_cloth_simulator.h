@@ -61,8 +61,8 @@ struct PbdSettings {
   /// Self-collision and proxy candidates are searched every this many sub-steps (within the
   /// distance a vertex can travel meanwhile), 1..64. Default 4.
   int contact_interval = 4;
-  /// Long-range attachments (Kim et al. 2012): each simulated vertex stays within its geodesic
-  /// rest distance (along edges, × (1 + tether_slack)) of the nearest kinematic (δ = 0) vertex.
+  /// Long-range attachments (Kim et al. 2012): each vertex with δ > 0.5 stays within its geodesic
+  /// rest distance (along edges, × (1 + tether_slack)) of the nearest mostly-skinned (δ ≤ 0.5) vertex.
   /// Not in the thesis; bounds the stretch of long hanging cloth (a skirt from the waist) that
   /// 16 sweeps alone cannot hold (docs/dev/cloth_experiments.md). Default true.
   bool tethers = true;
@@ -114,9 +114,10 @@ public:
   double kineticEnergy() const;
   /// Gravitational potential −Σ m g·x of the simulated vertices.
   double potentialEnergy() const;
-  /// Largest relative edge strain |l / l₀ − 1| over all edges.
+  /// Largest relative edge strain |l / l₀ − 1| over the simulated edges (both ends δ > 0; the
+  /// skinned part deforms as the skinning says).
   double maxStrain() const;
-  /// The q-quantile (0..1) of the edge strains |l / l₀ − 1| (0.99: all but the worst 1 %).
+  /// The q-quantile (0..1) of the strains of the simulated edges (0.99: all but the worst 1 %).
   double strainQuantile(double q) const;
   /// Vertex pairs in self-contact at the last step and vertex–proxy contacts.
   int numSelfContacts() const { return self_contacts_; }

@@ -76,9 +76,11 @@ struct BoneHeatOptions {
 /// heat of the nearest visible bone, p_b = 1 where b is nearest). The weights of the bones of a
 /// joint are summed. One sparse Cholesky factorization, one back-substitution per bone.
 /// \param V, F a closed (or nearly closed) triangle mesh in the skeleton's rest pose.
+/// A connected component in which no vertex can see a bone (an open layer of cloth around the
+/// body) is heated from its nearest bones without the visibility test.
 /// \returns #V by #J weights; joints without bones (end sites) get zero columns.
-/// \throws InvalidInput for an empty mesh, a skeleton without bones, a mesh component that no
-/// bone heats; NumericalFailure if the system cannot be factorized.
+/// \throws InvalidInput for an empty mesh or a skeleton without bones; NumericalFailure if the
+/// system cannot be factorized.
 SkinningWeights bone_heat_weights(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Skeleton& skeleton,
                                   const BoneHeatOptions& options = {});
 

@@ -1,0 +1,208 @@
+// `tbsp cloth build` (skeleton + bone-heat weights + proxies + clothness -> an AnimatableModel,
+// thesis §10.1/§10.4/§10.6) and `tbsp cloth animate` (a model driven by a BVH clip -> meshes).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "cloth_cmds.h"
+#include "progress_bar.h"
+#include "tbsp/cloth/animatable_model.h"
+#include "tbsp/core/error.h"
+#include "tbsp/io/atomic_file.h"
+#include "tbsp/io/bvh_skeleton.h"
+#include "tbsp/io/mesh_io.h"
+#include "tbsp/plugins/cloth_model_json.h"
+#include "tbsp/plugins/json_file.h"
+
+namespace fs = std::filesystem;
+
+namespace tbsp::cli {
+
+namespace {
+
+// ---- tbsp cloth build
+
+struct BuildArgs {
+  std::string mesh, bvh, segmentation, out, joints = "Thigh,Shin,UpLeg,Leg,Buttock,hip,abdomen,Hips,Spine";
+  int bvh_frame = 0;
+  double scale = 0.01;
+  ClothMaterial material;
+  bool quiet = false;
+};
+
+void add_build(CLI::App& cloth, BuildArgs& a, CLI::App*& sub) {
+  sub = cloth.add_subcommand("build", "an animatable model: skeleton from a BVH, bone-heat weights, clothness, collision proxies (thesis §10.6)");
+  sub->add_option("--template", a.mesh, "template mesh in the pose of the BVH frame --bvh-frame (e.g. frame 0 of the reference sequence)")
+      ->required();
+  sub->add_option("--bvh", a.bvh, "BVH clip whose skeleton drives the model")->required();
+  sub->add_option("--bvh-frame", a.bvh_frame, "BVH frame the template is posed in (default 0; -1 = the BVH zero pose)");
+  sub->add_option("--scale", a.scale, "BVH units -> metres (default 0.01)")->check(CLI::PositiveNumber);
+  sub->add_option("--segmentation", a.segmentation, "output of `tbsp cloth segment` for this template's sequence")->required();
+  sub->add_option("--proxy-joints", a.joints, "comma-separated joint-name parts that get collision proxies (default: legs, hips, spine)");
+  sub->add_option("--d-n", a.material.d_n, "cloth material d_n (default 2; `estimate` is not built yet)")->check(CLI::NonNegativeNumber);
+  sub->add_option("--d-t", a.material.d_t, "cloth material d_t (default 4)")->check(CLI::NonNegativeNumber);
+  sub->add_option("--k-bend", a.material.k_bend, "cloth material k_bend (default 0.3)")->check(CLI::Range(0.0, 1.0));
+  sub->add_option("--out", a.out, "model JSON (format tbsp-animatable-model)")->required();
+  sub->add_flag("-q,--quiet", a.quiet, "no summary line");
+}
+
+void read_segmentation(const std::string& path, Eigen::Index n, Eigen::VectorXd& sigma, Eigen::VectorXd& clothness) {
+  const nlohmann::json j = load_json_file(path);
+  const JsonReader r(path);
+  try {
+    if (!j.is_object() || !j.contains("clothness") || !j.contains("sigma")) r.fail("(top)", "expected \"sigma\" and \"clothness\" (written by `tbsp cloth segment`)");
+    const auto& c = j["clothness"];
+    const auto& s = j["sigma"];
+    if (!c.is_array() || Eigen::Index(c.size()) != n || !s.is_array() || Eigen::Index(s.size()) != n)
+      r.fail("clothness", "expected one value per template vertex (" + std::to_string(n) + "): was the segmentation made for this template?");
+    sigma.resize(n);
+    clothness.resize(n);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      clothness(i) = r.number(c[std::size_t(i)], "clothness[" + std::to_string(i) + "]");
+      if (!(clothness(i) >= 0 && clothness(i) <= 1)) r.fail("clothness[" + std::to_string(i) + "]", "must be in [0, 1]");
+      sigma(i) = s[std::size_t(i)].is_null() ? 0.0 : r.number(s[std::size_t(i)], "sigma[" + std::to_string(i) + "]");
+      if (sigma(i) < 0) r.fail("sigma[" + std::to_string(i) + "]", "must be ≥ 0");
+    }
+  } catch (const nlohmann::json::exception& e) {
+    throw_json_structure_error(path, e);
+  }
+}
+
+int cmd_build(const BuildArgs& a) {
+  const TriMesh mesh = read_mesh(a.mesh);
+  const BvhMotion clip = read_bvh(a.bvh);
+  AnimatableModel m;
+  m.mesh = mesh;
+  m.skeleton = skeleton_from_bvh(clip, a.bvh_frame, a.scale);
+  Eigen::VectorXd sigma;
+  read_segmentation(a.segmentation, mesh.V.rows(), sigma, m.clothness);
+  m.weights = bone_heat_weights(mesh.V, mesh.F, m.skeleton);
+  ProxyFitOptions po;
+  std::stringstream ss(a.joints);
+  for (std::string part; std::getline(ss, part, ',');)
+    if (!part.empty()) po.joints.push_back(part);
+  m.proxies = fit_collision_proxies(mesh.V, mesh.F, m.skeleton, sigma, m.clothness, po);
+  m.materials = {a.material};
+  // the frame time of the clip is the simulation step unless the model is animated otherwise
+  m.settings.time_step = 1.0 / 40;
+  save_animatable_model(a.out, m);
+  if (!a.quiet) {
+    int cloth = 0;
+    for (Eigen::Index i = 0; i < m.clothness.size(); ++i) cloth += m.clothness(i) > 0;
+    std::cout << "cloth build: " << mesh.V.rows() << " vertices (" << cloth << " simulated), " << m.skeleton.numJoints() << " joints, "
+              << m.proxies.size() << " proxies -> " << a.out << "\n";
+  }
+  return 0;
+}
+
+// ---- tbsp cloth animate
+
+struct AnimateArgs {
+  std::string model, bvh, out, frames;
+  double scale = 0.01;
+  int step = 3, every = 1, sheet = 8, settle = 40;
+  bool no_meshes = false, quiet = false;
+};
+
+void add_animate(CLI::App& cloth, AnimateArgs& a, CLI::App*& sub) {
+  sub = cloth.add_subcommand("animate", "a new animation: an animatable model driven by a BVH clip (skinning + cloth simulation)");
+  sub->add_option("--model", a.model, "model JSON from `tbsp cloth build`")->required();
+  sub->add_option("--bvh", a.bvh, "BVH clip with the model's joint names")->required();
+  sub->add_option("--out", a.out, "output folder: mesh_FFFF.ply (FFFF = BVH frame), animate_report.json, contact_sheet.png")->required();
+  sub->add_option("--frames", a.frames, "BVH frames a:b (inclusive; default all)");
+  sub->add_option("--step", a.step, "BVH frames per simulated frame (default 3: 120 Hz clips at the model's 40 Hz)")->check(CLI::PositiveNumber);
+  sub->add_option("--scale", a.scale, "BVH units -> metres (default 0.01)")->check(CLI::PositiveNumber);
+  sub->add_option("--settle", a.settle, "frames the cloth settles in the first pose (default 40)")->check(CLI::NonNegativeNumber);
+  sub->add_option("--every", a.every, "write every n-th mesh (default 1)")->check(CLI::PositiveNumber);
+  sub->add_option("--contact-sheet", a.sheet, "frames in contact_sheet.png (default 8; 0 = none)")->check(CLI::NonNegativeNumber);
+  sub->add_flag("--no-meshes", a.no_meshes, "simulate and report only");
+  sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
+}
+
+int cmd_animate(const AnimateArgs& a) {
+  const AnimatableModel model = load_animatable_model(a.model);
+  const BvhMotion clip = read_bvh(a.bvh);
+  require_bvh_joints(clip, model.skeleton.names, a.bvh);
+  int f0 = 0, f1 = clip.numFrames() - 1;
+  if (!a.frames.empty()) {
+    std::istringstream is(a.frames);
+    char c = 0;
+    if (!(is >> f0) || !(is >> c) || c != ':' || !(is >> f1) || f0 < 0 || f1 < f0 || f1 >= clip.numFrames())
+      throw InvalidInput("--frames '" + a.frames + "': expected a:b with 0 <= a <= b < " + std::to_string(clip.numFrames()));
+  }
+  std::error_code ec;
+  fs::create_directories(a.out, ec);
+  if (ec || !fs::is_directory(a.out)) throw FileError("'" + a.out + "': cannot create the output folder (" + ec.message() + ")");
+  ModelAnimator anim(model);
+  std::vector<int> bvh_frames;
+  for (int f = f0; f <= f1; f += a.step) bvh_frames.push_back(f);
+  const int n = int(bvh_frames.size());
+  std::vector<int> sheet;
+  for (int k = 0; k < a.sheet && n > 0; ++k) sheet.push_back(a.sheet == 1 ? 0 : int(std::lround(double(k) * (n - 1) / (a.sheet - 1))));
+  ProgressBar bar(!a.quiet);
+  const auto cb = bar.callback();
+  nlohmann::json per_frame = nlohmann::json::array();
+  std::vector<TriMesh> meshes;
+  std::vector<std::string> titles;
+  double worst_strain = 0, total = 0;
+  int written = 0;
+  for (int k = 0; k < n; ++k) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const SkeletonPose pose = pose_by_name(model.skeleton, clip, bvh_frames[std::size_t(k)], a.scale, a.bvh);
+    const Eigen::MatrixX3d& V = k == 0 ? anim.start(pose, a.settle) : anim.step(pose);
+    const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    total += k ? sec : 0;
+    const double strain = anim.simulator().strainQuantile(0.99);
+    worst_strain = std::max(worst_strain, strain);
+    per_frame.push_back({{"bvh_frame", bvh_frames[std::size_t(k)]}, {"strain_p99", strain}, {"proxy_contacts", anim.simulator().numProxyContacts()},
+                         {"self_contacts", anim.simulator().numSelfContacts()}, {"seconds", sec}});
+    TriMesh t;
+    t.V = V;
+    t.F = model.mesh.F;
+    if (!a.no_meshes && k % a.every == 0) {
+      char name[32];
+      std::snprintf(name, sizeof name, "mesh_%04d.ply", bvh_frames[std::size_t(k)]);
+      write_mesh((fs::path(a.out) / name).string(), t);
+      ++written;
+    }
+    if (std::find(sheet.begin(), sheet.end(), k) != sheet.end())
+      meshes.push_back(t), titles.push_back("BVH frame " + std::to_string(bvh_frames[std::size_t(k)]));
+    report_progress(cb, double(k + 1) / n, "animating");
+  }
+  bar.finish();
+  nlohmann::json rep;
+  rep["model"] = a.model;
+  rep["bvh"] = a.bvh;
+  rep["frames"] = n;
+  rep["bvh_frames"] = {f0, f1, a.step};
+  rep["meshes_written"] = written;
+  rep["frames_per_second"] = n > 1 ? (n - 1) / std::max(total, 1e-9) : 0.0;
+  rep["worst_strain_p99"] = worst_strain;
+  rep["per_frame"] = per_frame;
+  write_text_file_atomic((fs::path(a.out) / "animate_report.json").string(), rep.dump(1) + "\n");
+  write_contact_sheet((fs::path(a.out) / "contact_sheet.png").string(), meshes, titles);
+  if (!a.quiet)
+    std::cout << "cloth animate: " << n << " frames at " << (n > 1 ? (n - 1) / std::max(total, 1e-9) : 0.0) << " frames/s, " << written
+              << " meshes in " << a.out << "\n";
+  return 0;
+}
+
+}  // namespace
+
+void add_cloth_model_commands(CLI::App& cloth, CommandTable& table) {
+  register_command<BuildArgs>(cloth, table, add_build, cmd_build);
+  register_command<AnimateArgs>(cloth, table, add_animate, cmd_animate);
+}
+
+void add_cloth_commands(CLI::App& app, CommandTable& table) {
+  CLI::App* cloth = app.add_subcommand("cloth", "cloth estimation (thesis ch. 10, docs/cloth.md): synth, segment, build, animate");
+  cloth->require_subcommand(1);
+  add_cloth_segment_commands(*cloth, table);
+  add_cloth_model_commands(*cloth, table);
+}
+
+}  // namespace tbsp::cli
