@@ -265,24 +265,24 @@ void PbdClothSimulator::step(const Eigen::MatrixX3d& targets_in, const std::vect
   const int interval = settings_.contact_interval;
   for (int s = 0; s < ns; ++s) {
     const double t0 = double(s) / ns, t1 = double(s + 1) / ns;
-    if (s % interval == 0) {
-      // contacts for the next `window` sub-steps, within the distance a vertex can travel in them
-      const int window = std::min(interval, ns - s);
-      const double T = window * dt;
-      std::vector<double> travel(n);
-      double vmax = 0;
-      const double fall = 0.5 * settings_.gravity.norm() * T * T;
-      for (std::size_t i = 0; i < n; ++i) {
-        if (inv_mass_[i] != 0) {
-          travel[i] = vel_[i].norm() * T + fall;
-          vmax = std::max(vmax, travel[i]);
-        } else {
-          travel[i] = (targets.row(Eigen::Index(i)).transpose() - pos_[i]).norm();
-        }
+    // proxy candidates every sub-step (cheap: one sphere test per vertex and proxy; constraints
+    // such as tethers can move a vertex farther than its velocity says), self-contacts every
+    // `contact_interval` sub-steps within the distance a vertex can travel meanwhile
+    const int window = s % interval == 0 ? std::min(interval, ns - s) : 1;
+    const double T = window * dt;
+    std::vector<double> travel(n);
+    double vmax = 0;
+    const double fall = 0.5 * settings_.gravity.norm() * T * T;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (inv_mass_[i] != 0) {
+        travel[i] = vel_[i].norm() * T + fall;
+        vmax = std::max(vmax, travel[i]);
+      } else {
+        travel[i] = (targets.row(Eigen::Index(i)).transpose() - pos_[i]).norm();
       }
-      findProxyCandidates(lerp(t0), lerp(double(s + window) / ns), vmax);
-      findSelfContacts(travel);
     }
+    findProxyCandidates(lerp(t0), lerp(t1), vmax);
+    if (s % interval == 0) findSelfContacts(travel);
     substep(targets, lerp(t0), lerp(t1), t1, dt);
   }
   targets_prev_ = targets;
