@@ -28,6 +28,23 @@ constexpr double kMaxBendSweep = 0.5;
 // The sweeps run on several threads only for meshes large enough to pay for the barriers.
 constexpr std::size_t kParallelMin = 1024;
 
+// Sweeps the colours of a constraint graph: each colour split over the threads of the enclosing
+// parallel region (static schedule: the same split every time), the conflict colour (if any) by
+// one thread.
+template <class One>
+void sweep_colours(const std::vector<std::vector<int>>& colours, std::size_t conflict, One one) {
+  for (std::size_t ci = 0; ci < colours.size(); ++ci) {
+    const auto& colour = colours[ci];
+    if (ci == conflict) {
+#pragma omp single
+      for (int q : colour) one(q);
+    } else {
+#pragma omp for schedule(static)
+      for (std::size_t q = 0; q < colour.size(); ++q) one(colour[q]);
+    }
+  }
+}
+
 }  // namespace
 
 void PbdClothSimulator::applyExternal(double dt) {
@@ -160,16 +177,7 @@ void PbdClothSimulator::projectStretch(double k) {
     pa -= wa * corr;
     pb += wb * corr;
   };
-  for (std::size_t ci = 0; ci < stretch_colours_.size(); ++ci) {
-    const auto& colour = stretch_colours_[ci];
-    if (ci == stretch_conflict_colour_) {
-#pragma omp single
-      for (int q : colour) one(q);
-    } else {
-#pragma omp for schedule(static)
-      for (std::size_t q = 0; q < colour.size(); ++q) one(colour[q]);
-    }
-  }
+  sweep_colours(stretch_colours_, stretch_conflict_colour_, one);
 }
 
 void PbdClothSimulator::projectBend(const std::vector<double>& kr) {
@@ -209,16 +217,7 @@ void PbdClothSimulator::projectBend(const std::vector<double>& kr) {
       pred_[i2] -= w2 * lambda * d2;
       pred_[i3] -= w3 * lambda * d3;
   };
-  for (std::size_t ci = 0; ci < bend_colours_.size(); ++ci) {
-    const auto& colour = bend_colours_[ci];
-    if (ci == bend_conflict_colour_) {
-#pragma omp single
-      for (int q : colour) one(q);
-    } else {
-#pragma omp for schedule(static)
-      for (std::size_t q = 0; q < colour.size(); ++q) one(colour[q]);
-    }
-  }
+  sweep_colours(bend_colours_, bend_conflict_colour_, one);
 }
 
 void PbdClothSimulator::projectTethers() {

@@ -1,5 +1,7 @@
 #include "ray_caster.h"
 
+#include "../mesh/embree_device.h"
+
 #include <embree3/rtcore.h>
 
 #include <Eigen/Geometry>
@@ -14,17 +16,6 @@ namespace tbsp {
 namespace detail {
 
 namespace {
-
-RTCDevice ray_device() {
-  static RTCDevice device = [] {
-    RTCDevice d = rtcNewDevice(nullptr);
-    if (!d)
-      throw NumericalFailure("[tbsp::cloth] Embree could not create a device (error " +
-                             std::to_string(int(rtcGetDeviceError(nullptr))) + ")");
-    return d;
-  }();
-  return device;
-}
 
 // Möller–Trumbore in double; returns false when the ray misses the (closed) triangle.
 bool intersect(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
@@ -77,7 +68,7 @@ struct RayCaster::Impl {
 RayCaster::RayCaster(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) : impl_(new Impl) {
   impl_->V = V;
   impl_->F = F;
-  RTCDevice device = ray_device();
+  RTCDevice device = embree_device();
   impl_->scene = rtcNewScene(device);
   RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
   auto* vb = static_cast<float*>(

@@ -2,6 +2,8 @@
 
 #include <embree3/rtcore.h>
 
+#include "embree_device.h"
+
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
@@ -16,6 +18,16 @@
 #include "tbsp/core/error.h"
 
 namespace tbsp {
+
+RTCDevice detail::embree_device() {
+  static RTCDevice device = [] {
+    RTCDevice d = rtcNewDevice(nullptr);
+    if (!d)
+      throw NumericalFailure("[tbsp] Embree could not create a device (error " + std::to_string(int(rtcGetDeviceError(nullptr))) + ")");
+    return d;
+  }();
+  return device;
+}
 
 namespace {
 using K = CGAL::Simple_cartesian<double>;
@@ -113,19 +125,6 @@ Eigen::VectorXd MeshDistance::distances(const Eigen::MatrixX3d& P, Eigen::Vector
 
 namespace {
 
-// One Embree device for the process (creating one costs milliseconds; builds and queries on it
-// are thread-safe). Created on first use.
-RTCDevice shared_device() {
-  static RTCDevice device = [] {
-    RTCDevice d = rtcNewDevice(nullptr);
-    if (!d)
-      throw NumericalFailure("[tbsp::point_mesh_distances] Embree could not create a device (error " +
-                             std::to_string(int(rtcGetDeviceError(nullptr))) + ")");
-    return d;
-  }();
-  return device;
-}
-
 float round_down(double x) {
   const float f = float(x);
   return double(f) <= x ? f : std::nextafter(f, -std::numeric_limits<float>::infinity());
@@ -195,7 +194,7 @@ Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::Mat
     }
   const Triangles mesh{V, F};
   const double scale = V.cwiseAbs().maxCoeff();
-  RTCDevice device = shared_device();
+  RTCDevice device = detail::embree_device();
   RTCScene scene = rtcNewScene(device);
   RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
   rtcSetGeometryUserPrimitiveCount(g, unsigned(F.rows()));
