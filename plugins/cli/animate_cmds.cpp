@@ -87,9 +87,7 @@ int cmd_animate(const AnimateArgs& a) {
   } catch (const InvalidInput& e) {
     throw InvalidInput(a.map + ": " + e.what());
   }
-  std::error_code ec;
-  fs::create_directories(a.out, ec);
-  if (ec || !fs::is_directory(a.out)) throw FileError("'" + a.out + "': cannot create the output folder (" + ec.message() + ")");
+  make_out_dir(a.out);
 
   MarkerAnimation anim;
   MarkerAnimationOptions o = a.o;
@@ -107,9 +105,7 @@ int cmd_animate(const AnimateArgs& a) {
     throw InvalidInput(a.map + " / " + a.markers + ": " + e.what());
   }
   const int n = f1 - f0 + 1;
-  std::vector<int> sheet_frames;
-  for (int k = 0; k < a.sheet && n > 0; ++k) sheet_frames.push_back(a.sheet == 1 ? 0 : int(std::lround(double(k) * (n - 1) / (a.sheet - 1))));
-  sheet_frames.erase(std::unique(sheet_frames.begin(), sheet_frames.end()), sheet_frames.end());
+  const std::vector<int> sheet_frames = evenly_spread(a.sheet, n);
   std::vector<RenderPanel> panels;
   TriMesh m;
   int written = 0, i = 0;

@@ -17,6 +17,7 @@
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/plugins/preview_render.h"
 #include "tbsp/plugins/skirted_mannequin.h"
+#include "tbsp/plugins/synth_studio.h"
 
 namespace fs = std::filesystem;
 
@@ -60,25 +61,13 @@ void write_contact_sheet(const std::string& path, const std::vector<TriMesh>& me
 
 namespace {
 
-void make_out_dir(const std::string& out) {
-  std::error_code ec;
-  fs::create_directories(out, ec);
-  if (ec || !fs::is_directory(out)) throw FileError("'" + out + "': cannot create the output folder (" + ec.message() + ")");
-}
-
-std::vector<int> spread(int count, int n) {
-  std::vector<int> f;
-  for (int k = 0; k < count && n > 0; ++k) f.push_back(count == 1 ? 0 : int(std::lround(double(k) * (n - 1) / (count - 1))));
-  f.erase(std::unique(f.begin(), f.end()), f.end());
-  return f;
-}
-
 // ---- tbsp cloth synth
 
 struct SynthArgs {
   std::string bvh, out;
   synth::SkirtSequenceOptions o;
   int sheet = 6;
+  int studio_views = 0, studio_size = 640;
   bool quiet = false;
 };
 
@@ -95,6 +84,10 @@ void add_synth(CLI::App& cloth, SynthArgs& a, CLI::App*& sub) {
   sub->add_option("--d-t", a.o.material.d_t, "true tangential drag d_t (default 4)")->check(CLI::NonNegativeNumber);
   sub->add_option("--k-bend", a.o.material.k_bend, "true bending stiffness k_bend (default 0.3)")->check(CLI::Range(0.0, 1.0));
   sub->add_option("--contact-sheet", a.sheet, "frames in contact_sheet.png (default 6; 0 = none)")->check(CLI::NonNegativeNumber);
+  sub->add_option("--studio-views", a.studio_views,
+                  "also render the sequence into a textured studio of this many cameras: OUT/studio/studio.yaml, images, silhouettes (default 0 = none)")
+      ->check(CLI::Range(0, 64));
+  sub->add_option("--studio-size", a.studio_size, "studio image width = height in pixels (default 640)")->check(CLI::Range(16, 8192));
   sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
 }
 
@@ -105,19 +98,38 @@ int cmd_synth(const SynthArgs& a) {
   make_out_dir(a.out);
   ProgressBar bar(!a.quiet);
   const auto cb = bar.callback();
-  const std::vector<int> sheet = spread(a.sheet, a.o.frames);
+  const std::vector<int> sheet = evenly_spread(a.sheet, a.o.frames);
   std::vector<TriMesh> meshes;
   std::vector<std::string> titles;
+  std::vector<Eigen::MatrixX3d> frames;  // kept for the studio only
   synth::simulate_skirt_sequence(m, s, clip, a.o, [&](int f, const Eigen::MatrixX3d& V) {
     TriMesh t;
     t.V = V;
     t.F = m.mesh.F;
+    if (a.studio_views > 0) frames.push_back(V);
     char name[32];
     std::snprintf(name, sizeof name, "mesh_%04d.ply", f);
     write_mesh((fs::path(a.out) / name).string(), t);
     if (std::binary_search(sheet.begin(), sheet.end(), f)) meshes.push_back(t), titles.push_back("frame " + std::to_string(f));
     report_progress(cb, double(f + 1) / a.o.frames, "simulating the skirt");
   });
+  if (a.studio_views > 0) {
+    synth::StudioOptions so;
+    so.cameras = a.studio_views;
+    so.width = so.height = a.studio_size;
+    so.frames = a.o.frames;
+    so.frame_rate = 1.0 / (a.o.bvh_step * clip.frame_time);
+    so.markers = 0;
+    synth::write_sequence_studio(
+        (fs::path(a.out) / "studio").string(), m.mesh,
+        [&](int f) {
+          TriMesh t;
+          t.V = frames[std::size_t(f)];
+          t.F = m.mesh.F;
+          return t;
+        },
+        so, [&](double x, const std::string&) { return !cb || cb(x, "rendering the studio"); });
+  }
   bar.finish();
   nlohmann::json truth;
   truth["bvh"] = a.bvh;
@@ -125,6 +137,7 @@ int cmd_synth(const SynthArgs& a) {
   truth["bvh_step"] = a.o.bvh_step;
   truth["first_bvh_frame"] = a.o.first_bvh_frame;
   truth["bvh_scale"] = a.o.bvh_scale;
+  truth["studio"] = a.studio_views > 0 ? nlohmann::json("studio/studio.yaml") : nlohmann::json(nullptr);
   truth["material"] = {{"d_n", a.o.material.d_n}, {"d_t", a.o.material.d_t}, {"k_bend", a.o.material.k_bend}};
   truth["skirt_begin"] = m.skirt_begin;
   truth["cloth"] = std::vector<int>(m.cloth.data(), m.cloth.data() + m.cloth.size());

@@ -25,5 +25,6 @@ void write_contact_sheet(const std::string& path, const std::vector<TriMesh>& me
 
 void add_cloth_segment_commands(CLI::App& cloth, CommandTable& table);  // synth, segment
 void add_cloth_model_commands(CLI::App& cloth, CommandTable& table);    // build, animate
+void add_cloth_estimate_commands(CLI::App& cloth, CommandTable& table); // estimate
 
 }  // namespace tbsp::cli

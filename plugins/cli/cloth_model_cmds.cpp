@@ -43,7 +43,7 @@ void add_build(CLI::App& cloth, BuildArgs& a, CLI::App*& sub) {
   sub->add_option("--scale", a.scale, "BVH units -> metres (default 0.01)")->check(CLI::PositiveNumber);
   sub->add_option("--segmentation", a.segmentation, "output of `tbsp cloth segment` for this template's sequence")->required();
   sub->add_option("--proxy-joints", a.joints, "comma-separated joint-name parts that get collision proxies (default: legs, hips, spine)");
-  sub->add_option("--d-n", a.material.d_n, "cloth material d_n (default 2; `estimate` is not built yet)")->check(CLI::NonNegativeNumber);
+  sub->add_option("--d-n", a.material.d_n, "cloth material d_n (default 2; `tbsp cloth estimate` finds it from a recording)")->check(CLI::NonNegativeNumber);
   sub->add_option("--d-t", a.material.d_t, "cloth material d_t (default 4)")->check(CLI::NonNegativeNumber);
   sub->add_option("--k-bend", a.material.k_bend, "cloth material k_bend (default 0.3)")->check(CLI::Range(0.0, 1.0));
   sub->add_option("--out", a.out, "model JSON (format tbsp-animatable-model)")->required();
@@ -114,7 +114,7 @@ void add_animate(CLI::App& cloth, AnimateArgs& a, CLI::App*& sub) {
   sub->add_option("--bvh", a.bvh, "BVH clip with the model's joint names")->required();
   sub->add_option("--out", a.out, "output folder: mesh_FFFF.ply (FFFF = BVH frame), animate_report.json, contact_sheet.png")->required();
   sub->add_option("--frames", a.frames, "BVH frames a:b (inclusive; default all)");
-  sub->add_option("--step", a.step, "BVH frames per simulated frame (default 3: 120 Hz clips at the model's 40 Hz)")->check(CLI::PositiveNumber);
+  sub->add_option("--step", a.step, "BVH frames per simulated frame (default 3: a 120 Hz clip at 40 Hz); the simulation step is step × the clip's frame time")->check(CLI::PositiveNumber);
   sub->add_option("--scale", a.scale, "BVH units -> metres (default 0.01)")->check(CLI::PositiveNumber);
   sub->add_option("--settle", a.settle, "frames the cloth settles in the first pose (default 40)")->check(CLI::NonNegativeNumber);
   sub->add_option("--every", a.every, "write every n-th mesh (default 1)")->check(CLI::PositiveNumber);
@@ -124,8 +124,11 @@ void add_animate(CLI::App& cloth, AnimateArgs& a, CLI::App*& sub) {
 }
 
 int cmd_animate(const AnimateArgs& a) {
-  const AnimatableModel model = load_animatable_model(a.model);
+  AnimatableModel model = load_animatable_model(a.model);
   const BvhMotion clip = read_bvh(a.bvh);
+  // the simulation advances by the clip's time between two simulated frames (a 30 Hz clip at
+  // --step 1 and a 120 Hz clip at --step 4 both step 1/30 s)
+  model.settings.time_step = a.step * clip.frame_time;
   require_bvh_joints(clip, model.skeleton.names, a.bvh);
   int f0 = 0, f1 = clip.numFrames() - 1;
   if (!a.frames.empty()) {
@@ -134,15 +137,12 @@ int cmd_animate(const AnimateArgs& a) {
     if (!(is >> f0) || !(is >> c) || c != ':' || !(is >> f1) || f0 < 0 || f1 < f0 || f1 >= clip.numFrames())
       throw InvalidInput("--frames '" + a.frames + "': expected a:b with 0 <= a <= b < " + std::to_string(clip.numFrames()));
   }
-  std::error_code ec;
-  fs::create_directories(a.out, ec);
-  if (ec || !fs::is_directory(a.out)) throw FileError("'" + a.out + "': cannot create the output folder (" + ec.message() + ")");
+  make_out_dir(a.out);
   ModelAnimator anim(model);
   std::vector<int> bvh_frames;
   for (int f = f0; f <= f1; f += a.step) bvh_frames.push_back(f);
   const int n = int(bvh_frames.size());
-  std::vector<int> sheet;
-  for (int k = 0; k < a.sheet && n > 0; ++k) sheet.push_back(a.sheet == 1 ? 0 : int(std::lround(double(k) * (n - 1) / (a.sheet - 1))));
+  const std::vector<int> sheet = evenly_spread(a.sheet, n);
   ProgressBar bar(!a.quiet);
   const auto cb = bar.callback();
   nlohmann::json per_frame = nlohmann::json::array();
@@ -169,7 +169,7 @@ int cmd_animate(const AnimateArgs& a) {
       write_mesh((fs::path(a.out) / name).string(), t);
       ++written;
     }
-    if (std::find(sheet.begin(), sheet.end(), k) != sheet.end())
+    if (std::binary_search(sheet.begin(), sheet.end(), k))
       meshes.push_back(t), titles.push_back("BVH frame " + std::to_string(bvh_frames[std::size_t(k)]));
     report_progress(cb, double(k + 1) / n, "animating");
   }
@@ -179,6 +179,7 @@ int cmd_animate(const AnimateArgs& a) {
   rep["bvh"] = a.bvh;
   rep["frames"] = n;
   rep["bvh_frames"] = {f0, f1, a.step};
+  rep["time_step"] = model.settings.time_step;
   rep["meshes_written"] = written;
   rep["frames_per_second"] = n > 1 ? (n - 1) / std::max(total, 1e-9) : 0.0;
   rep["worst_strain_p99"] = worst_strain;
@@ -203,6 +204,7 @@ void add_cloth_commands(CLI::App& app, CommandTable& table) {
   cloth->require_subcommand(1);
   add_cloth_segment_commands(*cloth, table);
   add_cloth_model_commands(*cloth, table);
+  add_cloth_estimate_commands(*cloth, table);
 }
 
 }  // namespace tbsp::cli

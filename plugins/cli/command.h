@@ -4,12 +4,15 @@
 // codes (0 ok, 2 invalid input, 3 numerical failure, 130 cancelled, 1 anything else).
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cctype>
 #include <filesystem>
 #include <functional>
 #include <memory>
 #include <string>
 #include <vector>
+
+#include "tbsp/core/error.h"
 
 namespace tbsp::cli {
 
@@ -18,6 +21,22 @@ struct Command {
   std::function<int()> run;    ///< runs it with the parsed options; returns the exit code
 };
 using CommandTable = std::vector<Command>;
+
+/// `count` indices spread evenly over 0..n-1 (first and last included), sorted, no duplicates:
+/// the frames of a contact sheet.
+inline std::vector<int> evenly_spread(int count, int n) {
+  std::vector<int> f;
+  for (int k = 0; k < count && n > 0; ++k) f.push_back(count == 1 ? 0 : static_cast<int>((static_cast<long>(k) * (n - 1) * 2 + (count - 1)) / (2L * (count - 1))));
+  f.erase(std::unique(f.begin(), f.end()), f.end());
+  return f;
+}
+
+/// Creates the output folder `out` (and its parents). \throws FileError when it cannot.
+inline void make_out_dir(const std::string& out) {
+  std::error_code ec;
+  std::filesystem::create_directories(out, ec);
+  if (ec || !std::filesystem::is_directory(out)) throw FileError("'" + out + "': cannot create the output folder (" + ec.message() + ")");
+}
 
 /// The file's extension in lower case, with the dot (".c3d"); "" when it has none.
 inline std::string lower_ext(const std::string& path) {

@@ -91,9 +91,7 @@ int cmd_capture(const CaptureArgs& a) {
       throw InvalidInput("camera '" + c.camera.name() + "' of " + a.studio + " has no images: feature tracking needs them (or run with --no-features)");
   }
   const TriMesh tmpl = read_mesh(a.mesh);
-  std::error_code ec;
-  fs::create_directories(a.out, ec);
-  if (ec || !fs::is_directory(a.out)) throw FileError("'" + a.out + "': cannot create the output folder (" + ec.message() + ")");
+  make_out_dir(a.out);
   PerformanceCaptureOptions o = a.o;
   o.features = !a.no_features;
   PerformanceCapture pc;

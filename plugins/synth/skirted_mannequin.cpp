@@ -1,5 +1,7 @@
 #include "tbsp/plugins/skirted_mannequin.h"
 
+#include "tbsp/cloth/animatable_model.h"
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -176,36 +178,22 @@ void simulate_skirt_sequence(const SkirtedMannequin& m, const Skeleton& s, const
   require_bvh_joints(clip, s.names, "simulate_skirt_sequence");
   if (int(clip.joints.size()) != s.numJoints())
     throw InvalidInput(w + "the clip has " + std::to_string(clip.joints.size()) + " joints, the skeleton " + std::to_string(s.numJoints()));
-  const Eigen::Index n = m.mesh.V.rows(), k = n - m.skirt_begin;
-  const Eigen::MatrixX3d skirt_rest = m.mesh.V.bottomRows(k);
-  // the skirt's faces are the last ones, re-indexed from skirt_begin
-  Eigen::Index first_face = 0;
-  while (first_face < m.mesh.F.rows() && m.mesh.F.row(first_face).minCoeff() < m.skirt_begin) ++first_face;
-  const Eigen::MatrixX3i F = m.mesh.F.bottomRows(m.mesh.F.rows() - first_face).array() - int(m.skirt_begin);
-  PbdClothSimulator sim;
-  sim.setMesh(skirt_rest, F);
-  PbdSettings st = o.settings;
-  st.time_step = o.bvh_step * clip.frame_time;
-  sim.setSettings(st);
-  sim.setClothness(m.clothness.tail(k));
-  sim.setMaterial(o.material);
-  auto pose = [&](int bvh_frame, Eigen::MatrixX3d& all, std::vector<RoundCone>& proxies) {
-    const auto T = skinning_transforms(s, bvh_pose(clip, bvh_frame, o.bvh_scale));
-    all = dual_quaternion_skinning(m.mesh.V, m.weights, T);
-    proxies = posed_proxies(m.limbs, T);
-  };
-  Eigen::MatrixX3d all;
-  std::vector<RoundCone> proxies;
-  pose(o.first_bvh_frame, all, proxies);
-  sim.reset(all.bottomRows(k));
-  for (int i = 0; i < o.settle_frames; ++i) sim.step(all.bottomRows(k), proxies);
+  // The generating model: rigid weights, the true clothness, the limb tubes as proxies, the true
+  // material. Animated exactly as an AnimatableModel is (ModelAnimator), so the material
+  // estimation's truth is defined by the same simulation it searches with.
+  AnimatableModel gen;
+  gen.mesh = m.mesh;
+  gen.skeleton = s;
+  gen.weights = m.weights;
+  gen.clothness = m.clothness;
+  gen.proxies = m.limbs;
+  gen.materials = {o.material};
+  gen.settings = o.settings;
+  gen.settings.time_step = o.bvh_step * clip.frame_time;
+  ModelAnimator anim(gen);
   for (int f = 0; f < o.frames; ++f) {
-    if (f > 0) {
-      pose(o.first_bvh_frame + f * o.bvh_step, all, proxies);
-      sim.step(all.bottomRows(k), proxies);
-    }
-    all.bottomRows(k) = sim.positions();
-    frame(f, all);
+    const SkeletonPose pose = bvh_pose(clip, o.first_bvh_frame + f * o.bvh_step, o.bvh_scale);
+    frame(f, f == 0 ? anim.start(pose, o.settle_frames) : anim.step(pose));
   }
 }
 

@@ -68,6 +68,22 @@ const Eigen::MatrixX3d& ModelAnimator::start(const SkeletonPose& pose, int settl
   return V_;
 }
 
+const Eigen::MatrixX3d& ModelAnimator::startFrom(const SkeletonPose& pose, const Eigen::MatrixX3d& positions, const Eigen::MatrixX3d& velocities) {
+  if (positions.rows() != model_.mesh.V.rows())
+    throw InvalidInput("[tbsp::ModelAnimator::startFrom] " + std::to_string(positions.rows()) + " positions for " + std::to_string(model_.mesh.V.rows()) +
+                       " vertices");
+  Eigen::MatrixX3d skinned;
+  std::vector<RoundCone> cones;
+  posed(pose, skinned, cones);
+  Eigen::MatrixX3d P = skinned;
+  for (Eigen::Index i = 0; i < P.rows(); ++i)
+    if (model_.clothness(i) > 0) P.row(i) = positions.row(i);
+  sim_.reset(P, velocities, skinned, cones);
+  V_ = sim_.positions();
+  started_ = true;
+  return V_;
+}
+
 const Eigen::MatrixX3d& ModelAnimator::step(const SkeletonPose& pose) {
   if (!started_) throw InvalidInput("[tbsp::ModelAnimator::step] call start() first");
   Eigen::MatrixX3d skinned;

@@ -234,6 +234,19 @@ void PbdClothSimulator::reset(const Eigen::MatrixX3d& P) {
   syncOut();
 }
 
+void PbdClothSimulator::reset(const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& U, const Eigen::MatrixX3d& targets,
+                              const std::vector<RoundCone>& proxies) {
+  if (U.rows() != P.rows() || targets.rows() != P.rows())
+    throw InvalidInput(std::string(kWhere) + "reset: " + std::to_string(U.rows()) + " velocities and " + std::to_string(targets.rows()) +
+                       " targets for " + std::to_string(P.rows()) + " positions");
+  if (!U.allFinite() || !targets.allFinite()) throw InvalidInput(std::string(kWhere) + "reset: non-finite velocities or targets");
+  reset(P);
+  for (Eigen::Index i = 0; i < U.rows(); ++i) vel_[std::size_t(i)] = delta_(i) > 0 ? Eigen::Vector3d(U.row(i).transpose()) : Eigen::Vector3d::Zero();
+  targets_prev_ = targets;
+  proxies_prev_ = proxies;
+  syncOut();
+}
+
 void PbdClothSimulator::step(const Eigen::MatrixX3d& targets_in, const std::vector<RoundCone>& proxies) {
   if (x_.rows() == 0) throw InvalidInput(std::string(kWhere) + "step: call setMesh first");
   const bool have_targets = targets_in.rows() > 0;
@@ -270,7 +283,8 @@ void PbdClothSimulator::step(const Eigen::MatrixX3d& targets_in, const std::vect
     // `contact_interval` sub-steps within the distance a vertex can travel meanwhile
     const int window = s % interval == 0 ? std::min(interval, ns - s) : 1;
     const double T = window * dt;
-    std::vector<double> travel(n);
+    std::vector<double>& travel = travel_;
+    travel.resize(n);
     double vmax = 0;
     const double fall = 0.5 * settings_.gravity.norm() * T * T;
     for (std::size_t i = 0; i < n; ++i) {

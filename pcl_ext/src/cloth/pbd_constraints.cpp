@@ -321,7 +321,8 @@ void PbdClothSimulator::substep(const Eigen::MatrixX3d& targets, const std::vect
                                 const std::vector<RoundCone>& cur, double t1, double dt) {
   const std::size_t n = pos_.size();
   // targets at the end of this sub-step
-  Points tgt(n);
+  Points& tgt = sub_targets_;
+  tgt.resize(n);
   for (std::size_t i = 0; i < n; ++i)
     tgt[i] = ((1 - t1) * targets_prev_.row(Eigen::Index(i)) + t1 * targets.row(Eigen::Index(i))).transpose();
 

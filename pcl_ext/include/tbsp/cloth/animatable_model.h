@@ -39,6 +39,10 @@ public:
   /// \brief Starts at `pose` (global joint transforms): the cloth starts at the skinned shape and
   /// settles for `settle_frames` frames in that pose. Returns the first frame.
   const Eigen::MatrixX3d& start(const SkeletonPose& pose, int settle_frames = 40);
+  /// \brief Starts from a known state at `pose`: simulated vertices (δ > 0) at `positions` with
+  /// `velocities` (m/s), kinematic ones at their skinned position; no settling. Returns it.
+  /// \throws InvalidInput on size mismatches or non-finite values.
+  const Eigen::MatrixX3d& startFrom(const SkeletonPose& pose, const Eigen::MatrixX3d& positions, const Eigen::MatrixX3d& velocities);
   /// \brief The next frame at `pose`. \throws InvalidInput before start() or on a pose size mismatch.
   const Eigen::MatrixX3d& step(const SkeletonPose& pose);
   const Eigen::MatrixX3d& positions() const { return V_; }

@@ -94,6 +94,10 @@ public:
 
   /// \brief Positions = P, velocities = 0. \throws InvalidInput on a size mismatch / NaN.
   void reset(const Eigen::MatrixX3d& P);
+  /// \brief The state after a step(targets, proxies) that ended at positions P with velocities U
+  /// (m/s; zero for kinematic vertices): restarting from a known state (the parameter estimation
+  /// restarts from the reference sequence). \throws InvalidInput on a size mismatch / NaN.
+  void reset(const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& U, const Eigen::MatrixX3d& targets, const std::vector<RoundCone>& proxies);
   /// \brief Advances one frame. `targets` are the skinned positions of this frame (blend
   /// constraints and kinematic vertices; empty = keep the current positions of kinematic
   /// vertices and no blend), `proxies` the collision cones in this frame's pose (their previous
@@ -151,6 +155,8 @@ private:
   Eigen::MatrixX3d targets_prev_;
   Eigen::VectorXd mass_, delta_;
   std::vector<double> inv_mass_;
+  Points sub_targets_;            // scratch: the targets at the end of a sub-step
+  std::vector<double> travel_;    // scratch: distance each vertex can travel in a contact window
   std::vector<double> k_blend_;  // per-sweep blend stiffness, cached
   int k_blend_sweeps_ = 0;
   Eigen::VectorXi region_;

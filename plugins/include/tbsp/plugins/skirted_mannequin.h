@@ -55,9 +55,11 @@ struct SkirtSequenceOptions {
   PbdSettings settings;      ///< time_step is set to bvh_step · the BVH frame time
 };
 
-/// \brief Drives the mannequin with the clip: the body by rigid skinning, the skirt by the
-/// simulator (δ from `clothness`, proxies = the limb tubes); calls `frame(n, V)` with the whole
-/// mesh of every produced frame (same vertex order as m.mesh). Deterministic.
+/// \brief Drives the mannequin with the clip: an AnimatableModel with the mannequin's rigid
+/// weights, `clothness`, the limb tubes as proxies and the true material, played by
+/// ModelAnimator (the body skinned, the skirt simulated — the same simulation the parameter
+/// estimation searches with); calls `frame(n, V)` with the whole mesh of every produced frame
+/// (same vertex order as m.mesh). Deterministic.
 /// \throws InvalidInput when the clip lacks a joint of the skeleton (names must match) or has
 /// fewer frames than requested.
 void simulate_skirt_sequence(const SkirtedMannequin& m, const Skeleton& skeleton, const BvhMotion& clip,

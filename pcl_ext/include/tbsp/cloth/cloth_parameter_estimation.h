@@ -1,0 +1,150 @@
+#pragma once
+/// \file cloth_parameter_estimation.h
+/// \brief Cloth material estimation from a studio recording (thesis §10.7): the material
+/// ρ = (d_n, d_t, k_bend) of each cloth region of an AnimatableModel is the one whose forward
+/// simulation, driven by the recorded skeleton motion, best explains the videos:
+///
+///   E_fit(ρ) = 1/N Σ_n ( α E_sil(ρ, n) + β E_sift(ρ, n) )                        (eq. 10.6)
+///
+/// - E_sil (eq. 10.7): mean over the region's silhouette rim vertices in all views (rendered with
+///   the Rasterizer, rim_vertices) of the squared image distance to the nearest boundary pixel of
+///   the measured silhouette;
+/// - E_sift (eq. 10.8): every SIFT correspondence (frame n − 1 → n, ClothObservations) whose
+///   frame n − 1 pixel lies on the region's simulated cloth is lifted to that surface point
+///   (triangle + barycentrics), carried to frame n by the simulation and reprojected; mean of the
+///   squared distances to the feature's measured position at n.
+/// Simulation: ModelAnimator; by default in windows of 10 frames restarted from the reference
+/// mesh sequence (see `window`: our change against chaos), or the whole sequence (the thesis).
+/// Squared distances are capped at `max_pixel_error`² (our addition: one rim vertex next to a
+/// far-away boundary or one mismatched feature otherwise dominates a frame).
+///
+/// Searches: the thesis' (K³ grid + n_sam greedy stochastic samples around the best, σ shrinking
+/// linearly to 0, the mean of the last ten particles returned) and ours: a small space-filling
+/// start design evaluated in parallel, then NLopt's BOBYQA (Powell's bound-constrained quadratic
+/// model, derivative-free) from its best sample — the same or lower E_fit with far fewer
+/// simulations (docs/cloth.md). Samples run in parallel (one simulation per thread; each is
+/// deterministic, so the result does not depend on the thread count).
+///
+/// Cost: one simulation of the whole sequence plus one rendering of every view per evaluated
+/// frame per sample. Errors: InvalidInput (pose count ≠ frame count, a region without cloth,
+/// invalid options or model), Cancelled (progress callback returned false).
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tbsp/cloth/animatable_model.h"
+#include "tbsp/cloth/cloth_observations.h"
+#include "tbsp/core/progress.h"
+
+namespace tbsp {
+
+enum class ClothSearch {
+  Thesis,  ///< K³ grid + greedy stochastic samples (§10.7)
+  Bobyqa,  ///< start design + NLopt BOBYQA (ours, default)
+};
+
+struct ClothEstimationOptions {
+  double alpha = 1.0;            ///< weight of E_sil, ≥ 0 (thesis 1)
+  double beta = 10.0;            ///< weight of E_sift, ≥ 0 (thesis 10)
+  double max_pixel_error = 20;   ///< residual cap, pixels, > 0
+  double clothness_min = 0.5;    ///< a vertex belongs to a region's cloth when δ ≥ this, (0, 1]
+  int frame_stride = 1;          ///< E is evaluated on every n-th frame (the simulation runs every frame), 1..1000; thesis 1
+  /// Frames per simulation window, 0..10000. 0 = the thesis: one simulation of the whole sequence
+  /// from the settled first pose. > 0 (default 10): the simulation restarts every `window` frames
+  /// from the reference sequence's state (positions, velocities by finite differences; needs
+  /// setReferenceSequence). Cloth simulation is chaotic — changing d_t by 0.1 % moves a skirt by
+  /// 1.3 cm on average after 50 frames — so whole-sequence E_fit is a noisy landscape whose
+  /// minimum a search finds only by chance; short windows keep the divergence below a pixel and
+  /// E_fit smooth in ρ at the same simulation cost (docs/dev/cloth_experiments.md).
+  int window = 10;
+  int settle_frames = 40;        ///< frames the cloth settles in the first pose, ≥ 0
+  ClothMaterial lower{0.0, 0.0, 0.0};    ///< search box (thesis: d_n ∈ [0, 10], d_t ∈ [0, 50], k_bend ∈ [0, 1])
+  ClothMaterial upper{10.0, 50.0, 1.0};
+  ClothSearch search = ClothSearch::Bobyqa;
+  int grid_k = 4;                ///< Thesis: K, grid samples per axis, 1..10
+  int greedy_samples = 192;      ///< Thesis: n_sam, ≥ 0
+  int start_samples = 8;         ///< Bobyqa: start design size (a scrambled 3-D Halton set + the box centre), 1..1000
+  int max_evaluations = 40;      ///< Bobyqa: simulations in all (start design included), ≥ start_samples
+  double tolerance = 0.01;       ///< Bobyqa: stop when a step changes ρ by less than this share of the box, > 0
+  std::uint64_t seed = 1;        ///< random choices (Halton scrambling, greedy samples)
+
+  bool isValid(std::string* why = nullptr) const;
+};
+
+/// The terms of E_fit for one sample.
+struct ClothFitEnergy {
+  double e_fit = 0;       ///< eq. 10.6
+  double e_sil = 0;       ///< mean over frames of E_sil (pixels²)
+  double e_sift = 0;      ///< mean over frames of E_sift (pixels²)
+  long rim_samples = 0;   ///< rim vertices counted, all frames and views
+  long feature_samples = 0;
+  int frames = 0;         ///< frames evaluated
+};
+
+struct ClothSample {
+  int region = 0;
+  ClothMaterial rho;
+  ClothFitEnergy energy;
+};
+
+struct ClothRegionEstimate {
+  int region = 0;
+  ClothMaterial rho;          ///< the estimate
+  ClothFitEnergy energy;      ///< E_fit at the estimate
+  int simulations = 0;        ///< samples simulated for this region
+  double seconds = 0;
+};
+
+struct ClothEstimationResult {
+  std::vector<ClothRegionEstimate> regions;
+  std::vector<ClothSample> samples;  ///< every sample, in evaluation order
+  int simulations = 0;
+  double seconds = 0;
+};
+
+class ClothParameterEstimation {
+public:
+  using Options = ClothEstimationOptions;
+
+  /// `model`: the animatable model (its materials are the starting values of the regions not
+  /// being estimated); `poses`: global joint transforms, one per observed frame (the recorded
+  /// skeleton motion); `observations`: the studio recording. The objects must outlive this one.
+  /// \throws InvalidInput on an invalid model, a pose count ≠ the frame count (< 2 frames), or a
+  /// region of the model without cloth.
+  ClothParameterEstimation(const AnimatableModel& model, const std::vector<SkeletonPose>& poses, const ClothObservations& observations);
+
+  /// \brief The mesh sequence the model was built from (one mesh per observed frame, the
+  /// model's vertex order; the performance capture's output): the states the windows restart
+  /// from. Must outlive this object. \throws InvalidInput on a count or size mismatch, NaN.
+  void setReferenceSequence(const std::vector<Eigen::MatrixX3d>& frames);
+  void setOptions(const ClothEstimationOptions& o);
+  const ClothEstimationOptions& options() const { return options_; }
+  void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
+
+  int numRegions() const { return static_cast<int>(model_.materials.size()); }
+  /// Vertices of region r's cloth (δ ≥ clothness_min).
+  int clothVertices(int region) const;
+
+  /// E_fit of one material for region `region` (the other regions keep `model`'s): one simulation.
+  ClothFitEnergy evaluate(int region, const ClothMaterial& rho) const;
+  /// Several samples in parallel (one thread each). Output in input order.
+  std::vector<ClothFitEnergy> evaluate(int region, const std::vector<ClothMaterial>& rhos) const;
+
+  /// Estimates every region in turn (each with the earlier regions at their estimates).
+  ClothEstimationResult estimate();
+
+private:
+  ClothRegionEstimate estimateRegion(int region, std::vector<ClothSample>& samples);
+  void checkRegion(int region) const;
+
+  AnimatableModel model_;  // a copy: materials change as regions are estimated
+  const std::vector<SkeletonPose>& poses_;
+  const std::vector<Eigen::MatrixX3d>* reference_ = nullptr;
+  const ClothObservations& obs_;
+  ClothEstimationOptions options_;
+  ProgressCallback progress_;
+};
+
+}  // namespace tbsp

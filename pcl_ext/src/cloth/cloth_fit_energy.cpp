@@ -1,0 +1,228 @@
+// E_fit of thesis §10.7 (eq. 10.6–10.8): one forward simulation of a material, rendered into
+// every view and compared with the observations. The search is in cloth_parameter_search.cpp.
+#include <algorithm>
+#include <cmath>
+
+#include "../multiview/capture_features.h"
+#include "tbsp/cloth/cloth_parameter_estimation.h"
+#include "tbsp/core/error.h"
+#include "tbsp/multiview/rasterizer.h"
+
+namespace tbsp {
+
+bool ClothEstimationOptions::isValid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (!(alpha >= 0) || !(beta >= 0) || !(alpha + beta > 0) || !std::isfinite(alpha + beta)) return fail("alpha and beta must be ≥ 0, not both 0");
+  if (!(max_pixel_error > 0) || !std::isfinite(max_pixel_error)) return fail("max_pixel_error must be positive");
+  if (!(clothness_min > 0 && clothness_min <= 1)) return fail("clothness_min must be in (0, 1]");
+  if (frame_stride < 1 || frame_stride > 1000) return fail("frame_stride must be in 1..1000");
+  if (settle_frames < 0) return fail("settle_frames must be ≥ 0");
+  if (!(lower.d_n >= 0 && lower.d_t >= 0 && lower.k_bend >= 0 && upper.k_bend <= 1) || !std::isfinite(upper.d_n + upper.d_t))
+    return fail("the search box must lie in d_n, d_t ≥ 0 (finite), k_bend ∈ [0, 1]");
+  if (!(upper.d_n >= lower.d_n && upper.d_t >= lower.d_t && upper.k_bend >= lower.k_bend)) return fail("the search box has upper < lower");
+  if (grid_k < 1 || grid_k > 10) return fail("grid_k must be in 1..10");
+  if (greedy_samples < 0) return fail("greedy_samples must be ≥ 0");
+  if (start_samples < 1 || start_samples > 1000) return fail("start_samples must be in 1..1000");
+  if (max_evaluations < start_samples) return fail("max_evaluations must be ≥ start_samples");
+  if (!(tolerance > 0) || !std::isfinite(tolerance)) return fail("tolerance must be positive");
+  if (window < 0 || window > 10000) return fail("window must be in 0..10000 (0 = the whole sequence)");
+  return true;
+}
+
+ClothParameterEstimation::ClothParameterEstimation(const AnimatableModel& model, const std::vector<SkeletonPose>& poses,
+                                                   const ClothObservations& observations)
+    : model_(model), poses_(poses), obs_(observations) {
+  const std::string w = "[tbsp::ClothParameterEstimation] ";
+  model_.validate("tbsp::ClothParameterEstimation");
+  if (obs_.numFrames() < 2) throw InvalidInput(w + "at least two observed frames are needed (got " + std::to_string(obs_.numFrames()) + ")");
+  if (int(poses_.size()) != obs_.numFrames())
+    throw InvalidInput(w + std::to_string(poses_.size()) + " skeleton poses for " + std::to_string(obs_.numFrames()) +
+                       " observed frames: give one pose per recorded frame (the same frame range and step)");
+  for (std::size_t f = 0; f < poses_.size(); ++f)
+    if (int(poses_[f].size()) != model_.skeleton.numJoints())
+      throw InvalidInput(w + "pose " + std::to_string(f) + " has " + std::to_string(poses_[f].size()) + " joints, the model's skeleton " +
+                         std::to_string(model_.skeleton.numJoints()));
+  for (int r = 0; r < numRegions(); ++r) checkRegion(r);
+}
+
+void ClothParameterEstimation::setReferenceSequence(const std::vector<Eigen::MatrixX3d>& frames) {
+  const std::string w = "[tbsp::ClothParameterEstimation] reference sequence: ";
+  if (int(frames.size()) != obs_.numFrames())
+    throw InvalidInput(w + std::to_string(frames.size()) + " meshes for " + std::to_string(obs_.numFrames()) + " observed frames (one per frame)");
+  for (std::size_t f = 0; f < frames.size(); ++f) {
+    if (frames[f].rows() != model_.mesh.V.rows())
+      throw InvalidInput(w + "frame " + std::to_string(f) + " has " + std::to_string(frames[f].rows()) + " vertices, the model " +
+                         std::to_string(model_.mesh.V.rows()) + " (the sequence the model was built from is needed)");
+    if (!frames[f].allFinite()) throw InvalidInput(w + "frame " + std::to_string(f) + " has non-finite coordinates");
+  }
+  reference_ = &frames;
+}
+
+void ClothParameterEstimation::setOptions(const ClothEstimationOptions& o) {
+  std::string why;
+  if (!o.isValid(&why)) throw InvalidInput("[tbsp::ClothParameterEstimation] " + why);
+  options_ = o;
+  for (int r = 0; r < numRegions(); ++r) checkRegion(r);
+}
+
+int ClothParameterEstimation::clothVertices(int region) const {
+  int n = 0;
+  for (Eigen::Index i = 0; i < model_.clothness.size(); ++i)
+    n += model_.clothness(i) >= options_.clothness_min && (model_.region.size() ? model_.region(i) : 0) == region;
+  return n;
+}
+
+void ClothParameterEstimation::checkRegion(int region) const {
+  if (region < 0 || region >= numRegions())
+    throw InvalidInput("[tbsp::ClothParameterEstimation] region " + std::to_string(region) + " does not exist (the model has " +
+                       std::to_string(numRegions()) + ")");
+  if (clothVertices(region) == 0)
+    throw InvalidInput("[tbsp::ClothParameterEstimation] cloth region " + std::to_string(region) + " has no vertex with clothness ≥ " +
+                       std::to_string(options_.clothness_min) +
+                       ": there is no cloth to estimate a material for (segment a sequence in which the cloth moves, or drop the region)");
+}
+
+namespace {
+
+struct FrameTerms {
+  double sil = 0, sift = 0;
+  long nsil = 0, nsift = 0;
+};
+
+// No depth discontinuity within 2 pixels (a feature next to an occluding contour may belong to
+// either side; the same test as the performance capture's lifting).
+bool smooth_depth(const RenderBuffers& b, int x, int y) {
+  const int r = 2;
+  if (x < r || y < r || x >= b.width - r || y >= b.height - r) return false;
+  const float d0 = b.depth[std::size_t(y) * std::size_t(b.width) + std::size_t(x)];
+  for (int dy = -r; dy <= r; dy += r)
+    for (int dx = -r; dx <= r; dx += r) {
+      const float d = b.depth[std::size_t(y + dy) * std::size_t(b.width) + std::size_t(x + dx)];
+      if (!std::isfinite(d) || std::abs(d - d0) >= 0.01f * d0) return false;
+    }
+  return true;
+}
+
+// The surface point at camera depth `z` projecting to `q` is the visible surface there.
+bool visible(const RenderBuffers& b, const Eigen::Vector2d& q, double z) {
+  const int x = int(std::lround(q.x())), y = int(std::lround(q.y()));
+  if (x < 0 || y < 0 || x >= b.width || y >= b.height) return false;
+  const float d = b.depth[std::size_t(y) * std::size_t(b.width) + std::size_t(x)];
+  return std::isfinite(d) && z <= d * 1.01;
+}
+
+}  // namespace
+
+ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMaterial& rho) const {
+  checkRegion(region);
+  AnimatableModel m = model_;
+  m.materials[std::size_t(region)] = rho;
+  m.validate("tbsp::ClothParameterEstimation::evaluate");
+  const Eigen::Index nv = m.mesh.V.rows();
+  std::vector<char> in_region(std::size_t(nv), 0);
+  for (Eigen::Index i = 0; i < nv; ++i)
+    in_region[std::size_t(i)] = m.clothness(i) >= options_.clothness_min && (m.region.size() ? m.region(i) : 0) == region;
+  std::vector<char> face_in(std::size_t(m.mesh.F.rows()), 0);
+  for (Eigen::Index f = 0; f < m.mesh.F.rows(); ++f)
+    face_in[std::size_t(f)] = in_region[std::size_t(m.mesh.F(f, 0))] && in_region[std::size_t(m.mesh.F(f, 1))] && in_region[std::size_t(m.mesh.F(f, 2))];
+
+  const auto& cams = obs_.cameras();
+  const int views = obs_.numViews(), frames = obs_.numFrames(), stride = options_.frame_stride;
+  const double cap2 = options_.max_pixel_error * options_.max_pixel_error;
+  Rasterizer raster;
+  std::vector<RenderBuffers> prev(static_cast<std::size_t>(views)), cur(static_cast<std::size_t>(views));
+  bool prev_valid = false;
+  const int W = options_.window;
+  if (W > 0 && !reference_)
+    throw InvalidInput("[tbsp::ClothParameterEstimation] window = " + std::to_string(W) +
+                       " restarts the simulation from the reference mesh sequence: call setReferenceSequence, or set window = 0 (the whole sequence)");
+  const double dt = m.settings.time_step;
+  ModelAnimator anim(m);
+  TriMesh mesh;
+  mesh.F = m.mesh.F;
+  ClothFitEnergy e;
+  double sum = 0, sum_sil = 0, sum_sift = 0;
+  for (int n = 0; n < frames; ++n) {
+    const bool restart = W > 0 ? n % W == 0 : n == 0;
+    if (restart && W > 0) {
+      const auto& ref = *reference_;
+      const std::size_t a = std::size_t(n > 0 ? n - 1 : 0), b = std::size_t(n > 0 ? n : std::min(1, frames - 1));
+      mesh.V = anim.startFrom(poses_[std::size_t(n)], ref[std::size_t(n)], (ref[b] - ref[a]) / dt);
+    } else {
+      mesh.V = restart ? anim.start(poses_[0], options_.settle_frames) : anim.step(poses_[std::size_t(n)]);
+    }
+    const bool evaluated = !restart && n % stride == 0;
+    const bool lift = (n + 1) % stride == 0 && (W == 0 || (n + 1) % W != 0);  // the next frame is evaluated
+    if (!evaluated && !lift) {
+      prev_valid = false;
+      continue;
+    }
+    for (int k = 0; k < views; ++k) raster.render(mesh, cams[std::size_t(k)], cur[std::size_t(k)]);
+    if (evaluated) {
+      FrameTerms t;
+      for (int k = 0; k < views; ++k) {
+        const Camera& cam = cams[std::size_t(k)];
+        for (int v : rim_vertices(mesh, cam, cur[std::size_t(k)])) {
+          if (!in_region[std::size_t(v)]) continue;
+          const double d = obs_.boundaryDistance(n, k, cam.project(mesh.V.row(v).transpose()));
+          t.sil += std::min(d * d, cap2);
+          ++t.nsil;
+        }
+        if (!prev_valid) continue;
+        const RenderBuffers& b = prev[std::size_t(k)];
+        for (const FeaturePair& p : obs_.correspondences(n, k)) {
+          const int x = int(std::lround(p.from.x())), y = int(std::lround(p.from.y()));
+          if (x < 0 || y < 0 || x >= b.width || y >= b.height) continue;
+          const std::size_t at = std::size_t(y) * std::size_t(b.width) + std::size_t(x);
+          const int face = b.face[at];
+          if (face < 0 || !face_in[std::size_t(face)] || !smooth_depth(b, x, y)) continue;
+          const double b1 = b.bary[2 * at], b2 = b.bary[2 * at + 1];
+          const Eigen::Vector3d X = detail::surface_point(mesh, face, Eigen::Vector3d(1 - b1 - b2, b1, b2));
+          if (!(cam.depth(X) > 0)) continue;
+          const Eigen::Vector2d q = cam.project(X);
+          if (!visible(cur[std::size_t(k)], q, cam.depth(X))) continue;  // occluded at frame n: the feature cannot be this point
+          const double d2 = (q - p.to.cast<double>()).squaredNorm();
+          t.sift += std::min(d2, cap2);
+          ++t.nsift;
+        }
+      }
+      const double es = t.nsil ? t.sil / double(t.nsil) : 0.0, ef = t.nsift ? t.sift / double(t.nsift) : 0.0;
+      sum += options_.alpha * es + options_.beta * ef;
+      sum_sil += es;
+      sum_sift += ef;
+      e.rim_samples += t.nsil;
+      e.feature_samples += t.nsift;
+      ++e.frames;
+    }
+    std::swap(prev, cur);
+    prev_valid = true;
+  }
+  if (e.frames) {
+    e.e_fit = sum / e.frames;
+    e.e_sil = sum_sil / e.frames;
+    e.e_sift = sum_sift / e.frames;
+  }
+  return e;
+}
+
+std::vector<ClothFitEnergy> ClothParameterEstimation::evaluate(int region, const std::vector<ClothMaterial>& rhos) const {
+  checkRegion(region);
+  std::vector<ClothFitEnergy> out(rhos.size());
+  std::vector<std::string> errors(rhos.size());
+#pragma omp parallel for schedule(dynamic, 1)
+  for (long i = 0; i < long(rhos.size()); ++i) {
+    try {
+      out[std::size_t(i)] = evaluate(region, rhos[std::size_t(i)]);
+    } catch (const std::exception& ex) {
+      errors[std::size_t(i)] = ex.what();
+    }
+  }
+  for (const std::string& s : errors)
+    if (!s.empty()) throw InvalidInput(s);
+  return out;
+}
+
+}  // namespace tbsp
