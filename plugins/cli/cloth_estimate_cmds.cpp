@@ -155,7 +155,6 @@ int cmd_estimate(EstimateArgs a) {
   a.o.search = a.search == "thesis" ? ClothSearch::Thesis : ClothSearch::Bobyqa;
   std::string why;
   if (!a.o.isValid(&why)) throw InvalidInput(why);
-  make_out_dir(a.out);
 
   ProgressBar bar(!a.quiet);
   const auto cb = bar.callback();
@@ -200,6 +199,7 @@ int cmd_estimate(EstimateArgs a) {
   }
   bar.finish();
 
+  make_out_dir(a.out);
   save_animatable_model((fs::path(a.out) / "estimated_model.json").string(), out);
   nlohmann::json rep;
   rep["model"] = a.model;

@@ -116,3 +116,48 @@ TEST(CliCloth, BadInputsAreClearErrorsAndWriteNothing) {
   EXPECT_NE(r.err.find("frames"), std::string::npos) << r.err;
   fs::remove_all(d);
 }
+
+// The material estimation end to end: a rendered 4-view studio of a simulated skirt, the model our
+// pipeline builds from the meshes, `cloth estimate` with a small budget and a landscape.
+TEST(CliCloth, EstimateFromARenderedStudio) {
+  TBSP_REQUIRE_FILE(clip("02_05.bvh"));
+  const fs::path d = temp_dir("estimate");
+  const std::string seq = (d / "seq").string();
+  auto r = run_cli("cloth synth --bvh " + clip("02_05.bvh") + " --frames 16 --studio-views 4 --studio-size 240 --contact-sheet 0 --out " + seq + " -q", d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  ASSERT_TRUE(fs::exists(d / "seq" / "studio" / "studio.yaml"));
+  ASSERT_TRUE(fs::exists(d / "seq" / "studio" / "images" / "cam3" / "0015.png"));
+  r = run_cli("cloth segment --frames " + seq + " --out " + (d / "seg.json").string() + " -q", d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = run_cli("cloth build --template " + (d / "seq" / "mesh_0000.ply").string() + " --bvh " + clip("02_05.bvh") + " --segmentation " +
+                  (d / "seg.json").string() + " --out " + (d / "model.json").string() + " -q",
+              d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const std::string common = "cloth estimate --model " + (d / "model.json").string() + " --studio " + (d / "seq" / "studio" / "studio.yaml").string() +
+                             " --bvh " + clip("02_05.bvh");
+  r = run_cli(common + " --reference " + seq + " --start-samples 4 --max-evaluations 8 --landscape 2 --truth 2,4,0.3 --out " + (d / "est").string() + " -q", d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto rep = read_json(d / "est" / "estimate_report.json");
+  ASSERT_EQ(rep["regions"].size(), 1u);
+  const int sims = rep["regions"][0]["simulations"].get<int>();
+  EXPECT_GE(sims, 4);
+  EXPECT_LE(sims, 8);
+  EXPECT_EQ(rep["samples"].size(), std::size_t(sims));
+  EXPECT_GT(rep["regions"][0]["energy"]["rim_samples"].get<long>(), 0);
+  EXPECT_GT(rep["regions"][0]["energy"]["feature_samples"].get<long>(), 0);
+  EXPECT_EQ(rep["landscape"]["e_fit"].size(), 4u);
+  EXPECT_GT(fs::file_size(d / "est" / "landscape.png"), 1000u);
+  const tbsp::AnimatableModel est = tbsp::load_animatable_model((d / "est" / "estimated_model.json").string());
+  EXPECT_DOUBLE_EQ(est.materials[0].k_bend, rep["regions"][0]["material"]["k_bend"].get<double>());
+  // bad inputs: a reference with one mesh per ... not every frame; a clip too short for the studio
+  fs::create_directories(d / "short");
+  fs::copy_file(d / "seq" / "mesh_0000.ply", d / "short" / "mesh_0000.ply");
+  r = run_cli(common + " --reference " + (d / "short").string() + " --out " + (d / "bad").string(), d);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("1 meshes for the studio's 16 frames"), std::string::npos) << r.err;
+  r = run_cli(common + " --first 1850 --out " + (d / "bad").string(), d);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--first"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d / "bad"));
+  fs::remove_all(d);
+}
