@@ -97,11 +97,7 @@ int main(int argc, char** argv) {
   std::printf("simulate+render %.1f s; observations %.1f s (%zu boundary px, %zu correspondences, %.1f MB)\n", t_gt, t_obs, obs.numBoundaryPixels(),
               obs.numCorrespondences(), obs.memoryBytes() / 1e6);
   AnimatableModel model = gt.model;
-  if (gt_model) {  // the generating model itself (rigid weights, true clothness, the limb tubes): E_fit(truth) ~ 0
-    model.weights = gt.mannequin.weights;
-    model.clothness = gt.mannequin.clothness;
-    model.proxies = gt.mannequin.limbs;
-  }
+  if (gt_model) model = synth::generating_model(gt.mannequin, gt.skeleton, ClothMaterial{}, gt.model.settings);
   if (gt_weights) model.weights = gt.mannequin.weights;  // diagnostic: the pipeline model with the generating skinning
   ClothParameterEstimation est(model, gt.poses, obs);
   ClothEstimationOptions eo;

@@ -34,6 +34,7 @@
 #include "tbsp/plugins/fit_json.h"
 #include "tbsp/plugins/json_file.h"
 #include "tbsp/plugins/marker_map_json.h"
+#include "tbsp/plugins/cloth_model_json.h"
 #include "tbsp/plugins/pipeline.h"
 #include "tbsp/plugins/tet_job_json.h"
 #include "tbsp/plugins/texture_json.h"
@@ -144,6 +145,7 @@ const std::map<std::string, Target>& targets() {
                      }}},
       {"texture", {"t.json", [](const std::string& p) { parse_texture_constraints(load_json_file(p), p); }}},
       {"marker_map", {"map.json", [](const std::string& p) { load_marker_map_json(p); }}},
+      {"cloth_model", {"model.json", [](const std::string& p) { load_animatable_model(p); }}},
       {"pipeline", {"p.yaml", [](const std::string& p) { pipeline::load_pipeline(p, fuzz_registry()); }}},
   };
   return t;

@@ -15,6 +15,7 @@
 #include "tbsp/io/atomic_file.h"
 #include "tbsp/io/bvh_skeleton.h"
 #include "tbsp/io/mesh_io.h"
+#include "tbsp/plugins/cloth_model_json.h"
 #include "tbsp/plugins/preview_render.h"
 #include "tbsp/plugins/skirted_mannequin.h"
 #include "tbsp/plugins/synth_studio.h"
@@ -74,7 +75,7 @@ struct SynthArgs {
 void add_synth(CLI::App& cloth, SynthArgs& a, CLI::App*& sub) {
   sub = cloth.add_subcommand("synth", "ground truth: a mannequin built from a BVH skeleton, wearing a simulated skirt, driven by the clip");
   sub->add_option("--bvh", a.bvh, "BVH clip (its skeleton builds the mannequin; CMU-style joint names)")->required();
-  sub->add_option("--out", a.out, "output folder: mesh_FFFF.ply per frame, truth.json, contact_sheet.png")->required();
+  sub->add_option("--out", a.out, "output folder: mesh_FFFF.ply per frame, truth.json, truth_model.json (the generating model), contact_sheet.png")->required();
   sub->add_option("--frames", a.o.frames, "frames to produce (default 200)")->check(CLI::PositiveNumber);
   sub->add_option("--bvh-step", a.o.bvh_step, "BVH frames per produced frame (default 3: 120 Hz -> 40 Hz)")->check(CLI::PositiveNumber);
   sub->add_option("--first", a.o.first_bvh_frame, "first BVH frame (default 0)")->check(CLI::NonNegativeNumber);
@@ -146,6 +147,11 @@ int cmd_synth(const SynthArgs& a) {
     limbs.push_back({{"joint", s.names[std::size_t(l.bone.joint)]}, {"child", s.names[std::size_t(l.bone.child)]}, {"ra", l.cone.ra}, {"rb", l.cone.rb}});
   truth["limbs"] = limbs;
   write_text_file_atomic((fs::path(a.out) / "truth.json").string(), truth.dump(1) + "\n");
+  {  // the generating model (rest pose, true weights, clothness, proxies, material): estimation runs without model error
+    PbdSettings st = a.o.settings;
+    st.time_step = a.o.bvh_step * clip.frame_time;
+    save_animatable_model((fs::path(a.out) / "truth_model.json").string(), synth::generating_model(m, s, a.o.material, st));
+  }
   write_contact_sheet((fs::path(a.out) / "contact_sheet.png").string(), meshes, titles);
   if (!a.quiet)
     std::cout << "cloth synth: " << a.o.frames << " frames of a " << m.mesh.V.rows() << "-vertex mannequin (skirt " << (m.mesh.V.rows() - m.skirt_begin)

@@ -186,8 +186,7 @@ AnimatableModel load_animatable_model(const std::string& path) {
     flag("flat_rest_angle", st.flat_rest_angle);
     try {
       m.validate("model");
-      PbdClothSimulator probe;  // settings ranges
-      probe.setSettings(st);
+      validate_pbd_settings(st, "model settings");
     } catch (const InvalidInput& e) {
       throw FileError(path + ": " + e.what());
     }

@@ -166,6 +166,19 @@ SkirtedMannequin make_skirted_mannequin(const Skeleton& s, const MannequinOption
   return m;
 }
 
+AnimatableModel generating_model(const SkirtedMannequin& m, const Skeleton& skeleton, const ClothMaterial& material, const PbdSettings& settings) {
+  AnimatableModel gen;
+  gen.mesh = m.mesh;
+  gen.skeleton = skeleton;
+  gen.weights = m.weights;
+  gen.clothness = m.clothness;
+  gen.proxies = m.limbs;
+  gen.materials = {material};
+  gen.settings = settings;
+  gen.validate("tbsp::synth::generating_model");
+  return gen;
+}
+
 void simulate_skirt_sequence(const SkirtedMannequin& m, const Skeleton& s, const BvhMotion& clip, const SkirtSequenceOptions& o,
                              const std::function<void(int, const Eigen::MatrixX3d&)>& frame) {
   const std::string w = "[tbsp::synth::simulate_skirt_sequence] ";
@@ -181,15 +194,9 @@ void simulate_skirt_sequence(const SkirtedMannequin& m, const Skeleton& s, const
   // The generating model: rigid weights, the true clothness, the limb tubes as proxies, the true
   // material. Animated exactly as an AnimatableModel is (ModelAnimator), so the material
   // estimation's truth is defined by the same simulation it searches with.
-  AnimatableModel gen;
-  gen.mesh = m.mesh;
-  gen.skeleton = s;
-  gen.weights = m.weights;
-  gen.clothness = m.clothness;
-  gen.proxies = m.limbs;
-  gen.materials = {o.material};
-  gen.settings = o.settings;
-  gen.settings.time_step = o.bvh_step * clip.frame_time;
+  PbdSettings st = o.settings;
+  st.time_step = o.bvh_step * clip.frame_time;
+  const AnimatableModel gen = generating_model(m, s, o.material, st);
   ModelAnimator anim(gen);
   for (int f = 0; f < o.frames; ++f) {
     const SkeletonPose pose = bvh_pose(clip, o.first_bvh_frame + f * o.bvh_step, o.bvh_scale);

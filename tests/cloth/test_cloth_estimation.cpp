@@ -168,10 +168,8 @@ TEST(ClothParameterEstimation, EnergyIsLowestAtTheTrueBendingStiffness) {
   TBSP_REQUIRE_FILE(std::string(TBSP_SHARED_DATA_DIR) + "/capture/dopomoc__BVH/02_05.bvh");
   const SmallGt* g = small_gt(truth);
   ASSERT_NE(g, nullptr);
-  AnimatableModel model = g->gt.model;  // the generating body (rigid weights, true δ, limb tubes)
-  model.weights = g->gt.mannequin.weights;
-  model.clothness = g->gt.mannequin.clothness;
-  model.proxies = g->gt.mannequin.limbs;
+  // the generating body (rigid weights, true δ, limb tubes), a wrong material to start from
+  const AnimatableModel model = synth::generating_model(g->gt.mannequin, g->gt.skeleton, ClothMaterial{}, g->gt.model.settings);
   ClothParameterEstimation est(model, g->gt.poses, *g->obs);
   est.setReferenceSequence(g->gt.frames);
   std::vector<ClothMaterial> rhos;

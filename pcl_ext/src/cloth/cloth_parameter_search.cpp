@@ -5,7 +5,6 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <limits>
 #include <random>
 
 #include <nlopt.h>
@@ -55,8 +54,8 @@ public:
     for (std::size_t i = 0; i < us.size(); ++i) {
       log_.push_back({region_, rhos[i], es[i]});
       out.push_back(es[i].e_fit);
-      if (es[i].e_fit < best_e_) {
-        best_e_ = es[i].e_fit;
+      if (es[i].e_fit < best_energy_.e_fit || count_ + int(i) == 0) {
+        best_energy_ = es[i];
         best_ = us[i];
       }
     }
@@ -69,7 +68,8 @@ public:
 
   int count() const { return count_; }
   const Unit& best() const { return best_; }
-  double bestEnergy() const { return best_e_; }
+  double bestEnergy() const { return best_energy_.e_fit; }
+  const ClothFitEnergy& bestTerms() const { return best_energy_; }
 
 private:
   const ClothParameterEstimation& est_;
@@ -78,7 +78,7 @@ private:
   const ProgressCallback& progress_;
   int budget_, count_ = 0;
   Unit best_{0.5, 0.5, 0.5};
-  double best_e_ = std::numeric_limits<double>::infinity();
+  ClothFitEnergy best_energy_;
 };
 
 int batch_size() {
@@ -176,8 +176,6 @@ Unit bobyqa_search(Evaluator& eval, const ClothEstimationOptions& o) {
   nlopt_set_xtol_abs1(opt, o.tolerance);
   nlopt_set_initial_step(opt, step);
   Unit x = eval.best();
-  // BOBYQA needs the start strictly inside the box by more than the trust radius
-  for (double& v : x) v = std::clamp(v, 0.0, 1.0);
   double f = 0;
   nlopt_optimize(opt, x.data(), &f);
   nlopt_destroy(opt);
@@ -204,9 +202,7 @@ ClothRegionEstimate ClothParameterEstimation::estimateRegion(int region, std::ve
   } else {
     bobyqa_search(eval, o);
     r.rho = from_unit(eval.best(), o);
-    r.energy = samples.back().energy;
-    for (const ClothSample& s : samples)
-      if (s.region == region && s.energy.e_fit == eval.bestEnergy()) r.energy = s.energy;
+    r.energy = eval.bestTerms();
     r.simulations = eval.count();
   }
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

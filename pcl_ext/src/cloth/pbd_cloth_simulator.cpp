@@ -201,18 +201,7 @@ void PbdClothSimulator::setMaterial(const ClothMaterial& m, int region) {
 }
 
 void PbdClothSimulator::setSettings(const PbdSettings& s) {
-  auto bad = [](const std::string& what) { throw InvalidInput(std::string(kWhere) + "setSettings: " + what); };
-  if (s.iterations < 1 || s.iterations > 1000) bad("iterations must be in 1..1000");
-  if (s.substeps < 1 || s.substeps > 64) bad("substeps must be in 1..64");
-  if (!(s.time_step > 0) || !std::isfinite(s.time_step)) bad("time_step must be > 0 seconds");
-  if (!s.gravity.allFinite()) bad("gravity must be finite");
-  if (!(s.drag_constant >= 0) || !(s.drag_unit > 0)) bad("drag_constant must be ≥ 0 and drag_unit > 0");
-  if (!(s.k_stretch >= 0 && s.k_stretch <= 1)) bad("k_stretch must be in [0, 1]");
-  if (!(s.thickness >= 0)) bad("thickness must be ≥ 0");
-  if (s.contact_interval < 1 || s.contact_interval > 64) bad("contact_interval must be in 1..64");
-  if (!(s.tether_slack >= 0 && s.tether_slack <= 1)) bad("tether_slack must be in [0, 1]");
-  if (!(s.friction >= 0 && s.friction <= 2) || !(s.restitution >= 0 && s.restitution <= 1))
-    bad("friction must be in [0, 2] and restitution in [0, 1]");
+  validate_pbd_settings(s, "tbsp::PbdClothSimulator::setSettings");
   settings_ = s;
   tethers_dirty_ = true;
   for (auto& b : bend_)

@@ -72,6 +72,10 @@ struct PbdSettings {
   bool flat_rest_angle = false;
 };
 
+/// \brief Checks the ranges stated above. \throws InvalidInput naming `where` and the first
+/// setting out of range.
+void validate_pbd_settings(const PbdSettings& s, const char* where = "tbsp::PbdSettings");
+
 /// \brief The PBD cloth solver. Not thread-safe per object; independent objects run in
 /// parallel (parameter estimation simulates many samples at once).
 class PbdClothSimulator {

@@ -9,6 +9,7 @@
 #include <functional>
 #include <vector>
 
+#include "tbsp/cloth/animatable_model.h"
 #include "tbsp/cloth/collision_proxies.h"
 #include "tbsp/cloth/pbd_cloth_simulator.h"
 #include "tbsp/cloth/skeleton.h"
@@ -54,6 +55,10 @@ struct SkirtSequenceOptions {
   ClothMaterial material;    ///< the true ρ
   PbdSettings settings;      ///< time_step is set to bvh_step · the BVH frame time
 };
+
+/// \brief The model that generates the ground truth: the mannequin's mesh (rest pose), its rigid
+/// weights and true clothness, the limb tubes as proxies, `material` and `settings`.
+AnimatableModel generating_model(const SkirtedMannequin& m, const Skeleton& skeleton, const ClothMaterial& material, const PbdSettings& settings);
 
 /// \brief Drives the mannequin with the clip: an AnimatableModel with the mannequin's rigid
 /// weights, `clothness`, the limb tubes as proxies and the true material, played by
