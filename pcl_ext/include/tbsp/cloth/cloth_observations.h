@@ -11,7 +11,7 @@
 /// the nearest boundary pixel is exact and O(log m).
 /// Correspondences: SIFT keypoints (OpenCV) on the silhouette of every frame, matched from
 /// frame n − 1 to frame n per view by descriptor (Lowe's ratio test), mutual best, within
-/// `max_motion_px`. Views are processed in parallel (OpenMP).
+/// `max_motion_px`. Views are processed in parallel (OpenMP). Library: tbsp::multiview.
 
 #include <cstddef>
 #include <memory>

@@ -25,6 +25,7 @@
 /// simulations (docs/cloth.md). Samples run in parallel (one simulation per thread; each is
 /// deterministic, so the result does not depend on the thread count).
 ///
+/// Library: tbsp::multiview (links OpenCV and NLopt; libtbsp stays free of both).
 /// Cost: one simulation of the whole sequence plus one rendering of every view per evaluated
 /// frame per sample. Errors: InvalidInput (pose count ≠ frame count, a region without cloth,
 /// invalid options or model), Cancelled (progress callback returned false).
