@@ -149,7 +149,7 @@ TEST(CliCloth, EstimateFromARenderedStudio) {
   EXPECT_GT(fs::file_size(d / "est" / "landscape.png"), 1000u);
   const tbsp::AnimatableModel est = tbsp::load_animatable_model((d / "est" / "estimated_model.json").string());
   EXPECT_DOUBLE_EQ(est.materials[0].k_bend, rep["regions"][0]["material"]["k_bend"].get<double>());
-  // bad inputs: a reference with one mesh per ... not every frame; a clip too short for the studio
+  // bad inputs: a reference with fewer meshes than studio frames; a clip too short for the studio
   fs::create_directories(d / "short");
   fs::copy_file(d / "seq" / "mesh_0000.ply", d / "short" / "mesh_0000.ply");
   r = run_cli(common + " --reference " + (d / "short").string() + " --out " + (d / "bad").string(), d);
