@@ -154,7 +154,7 @@ int cmd_estimate(EstimateArgs a) {
   }
   a.o.search = a.search == "thesis" ? ClothSearch::Thesis : ClothSearch::Bobyqa;
   std::string why;
-  if (!a.o.isValid(&why)) throw InvalidInput(why);
+  if (!a.o.isValid(&why)) throw InvalidInput(why);  // fail before reading the studio
 
   ProgressBar bar(!a.quiet);
   const auto cb = bar.callback();

@@ -16,6 +16,7 @@
 #include "tbsp/io/bvh_skeleton.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/plugins/cloth_model_json.h"
+#include "tbsp/plugins/skirt_studio.h"
 #include "tbsp/plugins/json_file.h"
 
 namespace fs = std::filesystem;
@@ -75,20 +76,15 @@ void read_segmentation(const std::string& path, Eigen::Index n, Eigen::VectorXd&
 int cmd_build(const BuildArgs& a) {
   const TriMesh mesh = read_mesh(a.mesh);
   const BvhMotion clip = read_bvh(a.bvh);
-  AnimatableModel m;
-  m.mesh = mesh;
-  m.skeleton = skeleton_from_bvh(clip, a.bvh_frame, a.scale);
-  Eigen::VectorXd sigma;
-  read_segmentation(a.segmentation, mesh.V.rows(), sigma, m.clothness);
-  m.weights = bone_heat_weights(mesh.V, mesh.F, m.skeleton);
+  Eigen::VectorXd sigma, clothness;
+  read_segmentation(a.segmentation, mesh.V.rows(), sigma, clothness);
   ProxyFitOptions po;
   std::stringstream ss(a.joints);
   for (std::string part; std::getline(ss, part, ',');)
     if (!part.empty()) po.joints.push_back(part);
-  m.proxies = fit_collision_proxies(mesh.V, mesh.F, m.skeleton, sigma, m.clothness, po);
+  // 40 Hz; `cloth animate` steps by the clip's frame time
+  AnimatableModel m = synth::build_animatable_model(mesh, skeleton_from_bvh(clip, a.bvh_frame, a.scale), sigma, clothness, po, 1.0 / 40);
   m.materials = {a.material};
-  // the frame time of the clip is the simulation step unless the model is animated otherwise
-  m.settings.time_step = 1.0 / 40;
   save_animatable_model(a.out, m);
   if (!a.quiet) {
     int cloth = 0;

@@ -9,6 +9,23 @@
 
 namespace tbsp::synth {
 
+AnimatableModel build_animatable_model(const TriMesh& rest, const Skeleton& skeleton, const Eigen::VectorXd& sigma_in,
+                                       const Eigen::VectorXd& clothness, const ProxyFitOptions& proxies, double time_step) {
+  AnimatableModel m;
+  m.mesh = rest;
+  m.skeleton = skeleton;
+  m.clothness = clothness;
+  Eigen::VectorXd sigma = sigma_in;
+  for (Eigen::Index i = 0; i < sigma.size(); ++i)
+    if (!std::isfinite(sigma(i))) sigma(i) = 0;  // no opposite surface: no evidence of motion
+  m.weights = bone_heat_weights(rest.V, rest.F, skeleton);
+  m.proxies = fit_collision_proxies(rest.V, rest.F, skeleton, sigma, clothness, proxies);
+  m.materials = {ClothMaterial{}};
+  m.settings.time_step = time_step;
+  m.validate("tbsp::synth::build_animatable_model");
+  return m;
+}
+
 AnimatableModel build_animatable_model(const TriMesh& rest, const std::vector<Eigen::MatrixX3d>& frames, const Skeleton& skeleton,
                                        double time_step) {
   if (frames.size() < 2) throw InvalidInput("[tbsp::synth::build_animatable_model] at least two frames are needed to segment the cloth");
@@ -16,19 +33,7 @@ AnimatableModel build_animatable_model(const TriMesh& rest, const std::vector<Ei
   seg.begin(frames.front(), rest.F);
   for (std::size_t f = 1; f < frames.size(); ++f) seg.addFrame(frames[f]);
   const ClothSegmentation::Result r = seg.finish();
-  AnimatableModel m;
-  m.mesh = rest;
-  m.skeleton = skeleton;
-  m.clothness = r.clothness;
-  Eigen::VectorXd sigma = r.sigma;
-  for (Eigen::Index i = 0; i < sigma.size(); ++i)
-    if (!std::isfinite(sigma(i))) sigma(i) = 0;  // no opposite surface: no evidence of motion
-  m.weights = bone_heat_weights(rest.V, rest.F, skeleton);
-  m.proxies = fit_collision_proxies(rest.V, rest.F, skeleton, sigma, m.clothness);
-  m.materials = {ClothMaterial{}};
-  m.settings.time_step = time_step;
-  m.validate("tbsp::synth::build_animatable_model");
-  return m;
+  return build_animatable_model(rest, skeleton, r.sigma, r.clothness, ProxyFitOptions{}, time_step);
 }
 
 SkirtStudio write_skirt_studio(const std::string& dir, const BvhMotion& clip, const SkirtStudioOptions& o, const ProgressCallback& progress) {

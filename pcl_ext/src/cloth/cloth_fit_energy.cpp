@@ -68,10 +68,13 @@ void ClothParameterEstimation::setOptions(const ClothEstimationOptions& o) {
   for (int r = 0; r < numRegions(); ++r) checkRegion(r);
 }
 
+bool ClothParameterEstimation::inRegion(Eigen::Index i, int region) const {
+  return model_.clothness(i) >= options_.clothness_min && (model_.region.size() ? model_.region(i) : 0) == region;
+}
+
 int ClothParameterEstimation::clothVertices(int region) const {
   int n = 0;
-  for (Eigen::Index i = 0; i < model_.clothness.size(); ++i)
-    n += model_.clothness(i) >= options_.clothness_min && (model_.region.size() ? model_.region(i) : 0) == region;
+  for (Eigen::Index i = 0; i < model_.clothness.size(); ++i) n += inRegion(i, region);
   return n;
 }
 
@@ -92,20 +95,6 @@ struct FrameTerms {
   long nsil = 0, nsift = 0;
 };
 
-// No depth discontinuity within 2 pixels (a feature next to an occluding contour may belong to
-// either side; the same test as the performance capture's lifting).
-bool smooth_depth(const RenderBuffers& b, int x, int y) {
-  const int r = 2;
-  if (x < r || y < r || x >= b.width - r || y >= b.height - r) return false;
-  const float d0 = b.depth[std::size_t(y) * std::size_t(b.width) + std::size_t(x)];
-  for (int dy = -r; dy <= r; dy += r)
-    for (int dx = -r; dx <= r; dx += r) {
-      const float d = b.depth[std::size_t(y + dy) * std::size_t(b.width) + std::size_t(x + dx)];
-      if (!std::isfinite(d) || std::abs(d - d0) >= 0.01f * d0) return false;
-    }
-  return true;
-}
-
 // The surface point at camera depth `z` projecting to `q` is the visible surface there.
 bool visible(const RenderBuffers& b, const Eigen::Vector2d& q, double z) {
   const int x = int(std::lround(q.x())), y = int(std::lround(q.y()));
@@ -119,12 +108,11 @@ bool visible(const RenderBuffers& b, const Eigen::Vector2d& q, double z) {
 ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMaterial& rho) const {
   checkRegion(region);
   AnimatableModel m = model_;
-  m.materials[std::size_t(region)] = rho;
-  m.validate("tbsp::ClothParameterEstimation::evaluate");
+  m.materials[std::size_t(region)] = rho;  // validated by ModelAnimator below
   const Eigen::Index nv = m.mesh.V.rows();
   std::vector<char> in_region(std::size_t(nv), 0);
   for (Eigen::Index i = 0; i < nv; ++i)
-    in_region[std::size_t(i)] = m.clothness(i) >= options_.clothness_min && (m.region.size() ? m.region(i) : 0) == region;
+    in_region[std::size_t(i)] = inRegion(i, region);
   std::vector<char> face_in(std::size_t(m.mesh.F.rows()), 0);
   for (Eigen::Index f = 0; f < m.mesh.F.rows(); ++f)
     face_in[std::size_t(f)] = in_region[std::size_t(m.mesh.F(f, 0))] && in_region[std::size_t(m.mesh.F(f, 1))] && in_region[std::size_t(m.mesh.F(f, 2))];
@@ -178,7 +166,7 @@ ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMateria
           if (x < 0 || y < 0 || x >= b.width || y >= b.height) continue;
           const std::size_t at = std::size_t(y) * std::size_t(b.width) + std::size_t(x);
           const int face = b.face[at];
-          if (face < 0 || !face_in[std::size_t(face)] || !smooth_depth(b, x, y)) continue;
+          if (face < 0 || !face_in[std::size_t(face)] || !detail::smooth_depth(b, x, y)) continue;
           const double b1 = b.bary[2 * at], b2 = b.bary[2 * at + 1];
           const Eigen::Vector3d X = detail::surface_point(mesh, face, Eigen::Vector3d(1 - b1 - b2, b1, b2));
           if (!(cam.depth(X) > 0)) continue;

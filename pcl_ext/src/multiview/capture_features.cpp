@@ -26,29 +26,32 @@ ViewFeatures detect_features(const cv::Mat& image, const cv::Mat& silhouette, in
   return out;
 }
 
+bool smooth_depth(const RenderBuffers& b, int x, int y) {
+  const int r = 2;
+  if (x < r || y < r || x >= b.width - r || y >= b.height - r) return false;
+  const float d0 = b.depth[std::size_t(y) * std::size_t(b.width) + std::size_t(x)];
+  for (int dy = -r; dy <= r; dy += r)
+    for (int dx = -r; dx <= r; dx += r) {
+      const float d = b.depth[std::size_t(y + dy) * std::size_t(b.width) + std::size_t(x + dx)];
+      if (!std::isfinite(d) || std::abs(d - d0) >= 0.01f * d0) return false;
+    }
+  return true;
+}
+
 LiftedFeatures lift_features(const ViewFeatures& f, const RenderBuffers& b, const std::vector<FeatureMatch>& inherit, const TriMesh* mesh,
                              const Camera* cam, double inherit_px) {
   LiftedFeatures out;
   std::vector<int> rows;
   std::vector<const FeatureMatch*> track(f.pixel.size(), nullptr);
-  const int r = 2;  // no depth discontinuity within r pixels
   if (mesh && cam)
     for (const FeatureMatch& m : inherit)
       if (m.keypoint >= 0 && std::size_t(m.keypoint) < track.size()) track[std::size_t(m.keypoint)] = &m;
   auto at = [&](int x, int y) { return static_cast<std::size_t>(y) * b.width + x; };
   for (std::size_t i = 0; i < f.pixel.size(); ++i) {
     const int x = static_cast<int>(std::lround(f.pixel[i].x())), y = static_cast<int>(std::lround(f.pixel[i].y()));
-    if (x < r || y < r || x >= b.width - r || y >= b.height - r) continue;
+    if (x < 0 || y < 0 || x >= b.width || y >= b.height) continue;
     const std::int32_t face = b.face[at(x, y)];
-    if (face < 0) continue;
-    const float d0 = b.depth[at(x, y)];
-    bool smooth = true;  // no depth discontinuity within 2 pixels
-    for (int dy = -r; dy <= r && smooth; dy += r)
-      for (int dx = -r; dx <= r && smooth; dx += r) {
-        const float d = b.depth[at(x + dx, y + dy)];
-        smooth = std::isfinite(d) && std::abs(d - d0) < 0.01f * d0;
-      }
-    if (!smooth) continue;
+    if (face < 0 || !smooth_depth(b, x, y)) continue;
     const FeatureMatch* t = track[i];
     if (t && (cam->project(surface_point(*mesh, t->face, t->bary)) - f.pixel[i]).norm() <= inherit_px) {
       out.face.push_back(t->face);  // the track keeps its surface point

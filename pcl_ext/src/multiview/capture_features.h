@@ -59,6 +59,11 @@ int match_features(const LiftedFeatures& from, const ViewFeatures& to, const Tri
 /// between the face normal and the direction to the camera below acos(min_cos)), pooled.
 LiftedFeatures facing_features(const std::vector<LiftedFeatures>& sets, const TriMesh& mesh, const Camera& cam, double min_cos);
 
+/// No depth discontinuity within 2 pixels of (x, y) (depths within 1 % of the centre's, all
+/// covered; false within 2 pixels of the border): a keypoint next to an occluding contour may
+/// belong to either side.
+bool smooth_depth(const RenderBuffers& b, int x, int y);
+
 /// Position of a surface point on the mesh.
 inline Eigen::Vector3d surface_point(const TriMesh& m, int face, const Eigen::Vector3d& b) {
   return b(0) * m.V.row(m.F(face, 0)).transpose() + b(1) * m.V.row(m.F(face, 1)).transpose() + b(2) * m.V.row(m.F(face, 2)).transpose();

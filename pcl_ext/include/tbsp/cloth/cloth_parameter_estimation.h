@@ -139,6 +139,7 @@ public:
 private:
   ClothRegionEstimate estimateRegion(int region, std::vector<ClothSample>& samples);
   void checkRegion(int region) const;
+  bool inRegion(Eigen::Index vertex, int region) const;  // δ ≥ clothness_min and the region's label
 
   AnimatableModel model_;  // a copy: materials change as regions are estimated
   const std::vector<SkeletonPose>& poses_;

@@ -39,10 +39,15 @@ struct SkirtStudio {
 SkirtStudio write_skirt_studio(const std::string& dir, const BvhMotion& clip, const SkirtStudioOptions& options,
                                const ProgressCallback& progress = {});
 
-/// \brief The model of a mesh sequence (constant connectivity, frame 0 = `rest`, in the
-/// skeleton's rest pose): clothness by ClothSegmentation over `frames`, bone-heat skinning
-/// weights, collision proxies fitted with the segmentation's σ; one region, default material;
-/// `time_step` seconds per frame. (The same steps as `tbsp cloth segment` + `tbsp cloth build`.)
+/// \brief The model of a template (`rest`, in the skeleton's rest pose) with its segmentation
+/// (σ, NaN = no opposite surface, counted as 0; δ): bone-heat skinning weights, collision proxies
+/// fitted with σ (`proxies` options), one region with the default material, `time_step` seconds
+/// per frame (`tbsp cloth build`). \throws InvalidInput as the steps do.
+AnimatableModel build_animatable_model(const TriMesh& rest, const Skeleton& skeleton, const Eigen::VectorXd& sigma,
+                                       const Eigen::VectorXd& clothness, const ProxyFitOptions& proxies, double time_step);
+
+/// \brief The same from a mesh sequence (constant connectivity, frame 0 = `rest`): the clothness
+/// by ClothSegmentation over `frames` first (`tbsp cloth segment` + `tbsp cloth build`).
 AnimatableModel build_animatable_model(const TriMesh& rest, const std::vector<Eigen::MatrixX3d>& frames, const Skeleton& skeleton,
                                        double time_step);
 
