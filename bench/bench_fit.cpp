@@ -5,6 +5,12 @@
 // (--only: run just the rows whose model name contains WORD, e.g. armadillo; --seed / --markers:
 // of the ground-truth scenarios (default 1 / 20); --propagation-weight, --rim-rejection: of every
 // fit (defaults ½, 0.5))
+//   --articulated DEG (repeatable): the articulated bunny (head and ears turned by DEG, ×1.1, 25 %
+//     hole, no outliers); --save-target FILE writes its true shape; --hole-oracle adds the hole
+//     floor of a rigidity prior (a deformation graph driven by the true positions outside the hole)
+//   --coarse N / --coarse-stiffness A0 A1 / --coarse-rounds N / --coarse-steps N / --coarse-radius R /
+//   --coarse-angle DEG / --coarse-point-weight W: the coarse stage (FitParameters::coarse_*);
+//   --refine-rotations, --detail-rounds N, --max-iterations N: as FitParameters
 // Times are the median of N runs (default 3; this machine is shared and noisy); the 43k row
 // also prints where the time goes (median stage times).
 // Rows (each GT scenario also with FitParameters::detail_rounds = 4): real single-view scan
@@ -24,6 +30,8 @@
 #include <vector>
 
 #include "tbsp/core/huge_pages.h"
+#include "tbsp/deform/deformation_graph.h"
+#include <Eigen/Geometry>
 #include "tbsp/plugins/synthetic_scan.h"
 #include "tbsp/fitting/template_fitter.h"
 #include "tbsp/io/cloud_io.h"
@@ -37,8 +45,10 @@ static const std::string kData = TBSP_SHARED_DATA_DIR;
 
 namespace {
 void row(const char* model, std::size_t markers, Eigen::Index verts, Eigen::Index pts, const FitReport& r, const char* extra = "") {
-  std::printf("| %-34s | %3zu | %6ld | %7ld | %6.3f%% | %6.3f%% | %2d | %6.2f | %s\n", model, markers, (long)verts, (long)pts,
-              100 * r.hausdorff_rel, 100 * r.p99 / r.bbox_diagonal, r.iterations, r.t_total, extra);
+  char coarse[64] = "";
+  if (r.coarse_nodes > 0) std::snprintf(coarse, sizeof coarse, " (coarse stage %.2f s, %d steps)", r.t_coarse, r.coarse_steps);
+  std::printf("| %-34s | %3zu | %6ld | %7ld | %6.3f%% | %6.3f%% | %2d | %6.2f | %s%s\n", model, markers, (long)verts, (long)pts,
+              100 * r.hausdorff_rel, 100 * r.p99 / r.bbox_diagonal, r.iterations, r.t_total, extra, coarse);
 }
 
 double hole_error(const synth::Scenario& s, const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
@@ -85,6 +95,7 @@ int main(int argc, char** argv) {
   FitParameters base;
   std::vector<double> articulated;  // --articulated DEG (repeatable): bunny head + ears turned by DEG
   std::string save_target;
+  bool hole_oracle = false;  // --hole-oracle: with --articulated, the floor of rigidity-prior hole filling
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--no-poisson") poisson = false;
@@ -98,14 +109,27 @@ int main(int argc, char** argv) {
     else if (a == "--detail-rounds" && i + 1 < argc) base.detail_rounds = std::atoi(argv[++i]);
     else if (a == "--articulated" && i + 1 < argc) articulated.push_back(std::atof(argv[++i]));
     else if (a == "--save-target" && i + 1 < argc) save_target = argv[++i];
+    else if (a == "--hole-oracle") hole_oracle = true;
+    else if (a == "--max-iterations" && i + 1 < argc) base.max_iterations = std::atoi(argv[++i]);
+    else if (a == "--coarse" && i + 1 < argc) base.coarse_nodes = std::atoi(argv[++i]);
+    else if (a == "--coarse-stiffness" && i + 2 < argc) { base.coarse_stiffness = std::atof(argv[++i]); base.coarse_final_stiffness = std::atof(argv[++i]); }
+    else if (a == "--coarse-rounds" && i + 1 < argc) base.coarse_rounds = std::atoi(argv[++i]);
+    else if (a == "--coarse-steps" && i + 1 < argc) base.coarse_steps = std::atoi(argv[++i]);
+    else if (a == "--coarse-radius" && i + 1 < argc) base.coarse_radius = std::atof(argv[++i]);
+    else if (a == "--coarse-angle" && i + 1 < argc) base.coarse_normal_angle_deg = std::atof(argv[++i]);
+    else if (a == "--coarse-point-weight" && i + 1 < argc) base.coarse_point_weight = std::atof(argv[++i]);
     else {
       std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N] "
-                           "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--articulated DEG]... [--save-target FILE]\n");
+                           "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--max-iterations N] "
+                           "[--articulated DEG]... [--save-target FILE] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
+                           "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W]\n");
       return 2;
     }
   }
   if (!base.isValid()) {
-    std::fprintf(stderr, "bench_fit: --propagation-weight must be > 0, --rim-rejection in (0, 1]\n");
+    std::string why;
+    base.isValid(&why);
+    std::fprintf(stderr, "bench_fit: %s\n", why.c_str());
     return 2;
   }
   std::printf("| model | #marks | #verts | #pts | Hausdorff/diag (ROI) | p99/diag | iters | time s | notes |\n");
@@ -171,6 +195,35 @@ int main(int argc, char** argv) {
     std::snprintf(note, sizeof note, "clean Hausdorff %.3f%%; hole: surface %.3f%%, per vertex %.3f%%", 100 * e.hausdorff_clean_rel,
                   100 * hole_error(s, fit.V, fit.F), 100 * e.hole_mean_rel);
     row(name, s.markers.size(), t.V.rows(), s.P.rows(), r, note);
+    if (hole_oracle) {
+      // the floor of as-rigid-as-possible hole filling on this scenario: a deformation graph
+      // (400 nodes) driven by the TRUE position of every vertex outside the hole, after the
+      // true scale and the best rigid motion; what it puts into the hole is all a rigidity prior can know there
+      Eigen::MatrixX3d X0 = o.scale * t.V;  // the true scale, then the best rigid motion
+      std::vector<int> ids;
+      for (Eigen::Index v = 0; v < t.V.rows(); ++v)
+        if (!s.hole_vertex[std::size_t(v)]) ids.push_back(int(v));
+      Eigen::Matrix3Xd A(3, Eigen::Index(ids.size())), B(3, Eigen::Index(ids.size()));
+      for (std::size_t k = 0; k < ids.size(); ++k) {
+        A.col(Eigen::Index(k)) = X0.row(ids[k]).transpose();
+        B.col(Eigen::Index(k)) = s.target.row(ids[k]).transpose();
+      }
+      const Eigen::Matrix4d T = Eigen::umeyama(A, B, false);
+      for (Eigen::Index v = 0; v < X0.rows(); ++v)
+        X0.row(v) = (T.topLeftCorner<3, 3>() * X0.row(v).transpose() + T.topRightCorner<3, 1>()).transpose();
+      std::string floors;
+      for (double alpha : {1.0, 0.1, 0.01, 0.001}) {
+        DeformationGraph g;
+        g.build(X0, t.F, 400);
+        std::vector<GraphConstraint> c;
+        for (int v : ids) c.push_back({v, s.target.row(v).transpose(), Eigen::Vector3d::Zero(), 1.0});
+        for (int it = 0; it < 10; ++it) g.solve(c, alpha * double(c.size()) / (2.0 * double(g.edges().size())));
+        char buf[64];
+        std::snprintf(buf, sizeof buf, "%s%g: %.3f%%", floors.empty() ? "" : ", ", alpha, 100 * hole_error(s, g.deform(), t.F));
+        floors += buf;
+      }
+      std::printf("|   hole floor (graph on the true positions outside the hole), stiffness %s |\n", floors.c_str());
+    }
   }
   // 2. ground truth scenarios on real meshes
   struct Case { const char* name; const char* path; int points; };

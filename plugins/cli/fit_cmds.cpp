@@ -155,6 +155,9 @@ void add_fit_commands(CLI::App& app, CommandTable& table) {
   fitc->add_option("--theta-max", a->p.max_normal_angle_deg, "max normal deviation θ_max in degrees");
   fitc->add_option("--iterations", a->p.max_iterations, "max iterations");
   fitc->add_option("--match-weight", a->p.match_weight, "weight of data constraints");
+  fitc->add_option("--coarse-nodes", a->p.coarse_nodes,
+                   "coarse stage: nodes of a deformation graph fitted to the scan before the iterations, for parts "
+                   "turned about joints (400 is the measured setting; 0 = off, the default)");
   fitc->add_option("--detail-rounds", a->p.detail_rounds,
                    "rounds of Laplacian updating after the fit, unsupported vertices held (sharper protrusions; 0 = off)");
   fitc->add_option("--detail-radius-factor", a->p.detail_radius_factor,

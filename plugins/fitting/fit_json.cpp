@@ -131,6 +131,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                       {"auto_markers", r.auto_markers},
                       {"seconds", r.t_alignment}};
   }
+  if (r.coarse_nodes > 0) j["coarse_stage"] = {{"nodes", r.coarse_nodes}, {"steps", r.coarse_steps}, {"seconds", r.t_coarse}};
   const auto& u = r.used;
   j["parameters"] = {{"max_match_distance", u.max_match_distance}, {"initial_match_distance", u.initial_match_distance},
                      {"max_normal_angle_deg", u.max_normal_angle_deg}, {"max_iterations", u.max_iterations},
@@ -147,7 +148,11 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"detail_weight", u.detail_weight}, {"detail_surface_weight", u.detail_surface_weight},
                      {"detail_residual_matching", u.detail_residual_matching}, {"detail_radius_factor", u.detail_radius_factor},
                      {"detail_normal_angle_deg", u.detail_normal_angle_deg}, {"detail_tolerance", u.detail_tolerance},
-                     {"detail_marker_weight", u.detail_marker_weight}, {"consistent_normals", u.consistent_normals}};
+                     {"detail_marker_weight", u.detail_marker_weight}, {"consistent_normals", u.consistent_normals},
+                     {"coarse_nodes", u.coarse_nodes}, {"coarse_rounds", u.coarse_rounds}, {"coarse_steps", u.coarse_steps},
+                     {"coarse_radius", u.coarse_radius}, {"coarse_stiffness", u.coarse_stiffness},
+                     {"coarse_final_stiffness", u.coarse_final_stiffness}, {"coarse_normal_angle_deg", u.coarse_normal_angle_deg},
+                     {"coarse_point_weight", u.coarse_point_weight}};
   j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
                  {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},
                  {"normals_flipped_for_consistency", r.normals_flipped_for_consistency},
@@ -165,6 +170,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                   {"pleat_faces_before", r.pleat_faces_before}, {"pleat_faces_after", r.pleat_faces_after},
                   {"pleat_collapses", r.pleat_collapses}};
   j["timings_s"] = {{"normals", r.t_normals},     {"search_structure", r.t_search}, {"initial_deformation", r.t_initial},
+                    {"coarse_stage", r.t_coarse},
                     {"global_scale", r.t_scale},  {"iterations", r.t_iterations},   {"matching", r.t_matching},
                     {"solve", r.t_solve},         {"propagation", r.t_propagation}, {"detail", r.t_detail},
                     {"remeshing", r.t_remeshing},

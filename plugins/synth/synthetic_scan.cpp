@@ -82,14 +82,14 @@ std::vector<Joint> bunny_head_and_ears(double angle_deg) {
   head.centre = Eigen::Vector3d(-0.045, 0.105, -0.02);
   head.side = Eigen::Vector3d(-1, 1, 0).normalized();
   head.axis = Eigen::Vector3d::UnitZ();
-  head.falloff = 0.012;
+  head.falloff = 0.035;  // narrower blends fold the neck's inner side through itself at 30-45 deg
   head.angle_deg = angle_deg;
   Joint ears;  // the base of the ears
   ears.centre = Eigen::Vector3d(-0.045, 0.148, -0.03);
   ears.side = Eigen::Vector3d::UnitY();
   ears.axis = Eigen::Vector3d::UnitZ();
-  ears.falloff = 0.008;
-  ears.angle_deg = angle_deg;
+  ears.falloff = 0.01;
+  ears.angle_deg = -angle_deg;  // tilted back: forwards they fold into the head at 45 deg
   return {head, ears};
 }
 

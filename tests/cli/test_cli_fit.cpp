@@ -128,6 +128,26 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
                 dir, &err),
             2);
   EXPECT_NE(err.find("detail_radius_factor"), std::string::npos) << err;
+  // the coarse stage: on request, reported, same connectivity; an invalid node count is refused
+  const std::string rep4 = (dir / "r4.json").string();
+  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+                    " --out " + out2 + " --report " + rep4 + " --coarse-nodes 200",
+                dir, &err),
+            0)
+      << err;
+  nlohmann::json j4;
+  std::ifstream(rep4) >> j4;
+  EXPECT_EQ(j4["coarse_stage"]["nodes"].get<int>(), 200);
+  EXPECT_GT(j4["coarse_stage"]["steps"].get<int>(), 0);
+  EXPECT_EQ(j4["parameters"]["coarse_nodes"].get<int>(), 200);
+  EXPECT_GT(j4["timings_s"]["coarse_stage"].get<double>(), 0.0);
+  EXPECT_EQ(read_mesh(out2).F, s.templ.F);
+  EXPECT_FALSE(j.contains("coarse_stage"));  // off by default
+  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+                    " --out " + out2 + " --coarse-nodes 2",
+                dir, &err),
+            2);
+  EXPECT_NE(err.find("coarse_nodes"), std::string::npos) << err;
   // bad input: a marker on a missing template vertex -> exit 2, message names it, output kept
   const auto before = std::filesystem::last_write_time(out);
   std::ofstream(dir / "bad.json") << R"({"markers": [{"template_vertex": 999999, "cloud_index": 0}]})";

@@ -203,6 +203,14 @@ bool FitParameters::isValid(std::string* why) const {
   if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
   if (max_vertices < 4) return bad("max_vertices must be >= 4");
   if (auto_markers < 0 || auto_markers > 1000) return bad("auto_markers must be in 0..1000 (0 = one pass)");
+  if (coarse_nodes != 0 && (coarse_nodes < 4 || coarse_nodes > 20000)) return bad("coarse_nodes must be 0 (off) or in 4..20000");
+  if (coarse_rounds < 1 || coarse_rounds > 100) return bad("coarse_rounds must be in 1..100");
+  if (coarse_steps < 1 || coarse_steps > 100) return bad("coarse_steps must be in 1..100");
+  if (!(coarse_radius > 0 && coarse_radius <= 1)) return bad("coarse_radius must be in (0, 1] (a fraction of the diagonal)");
+  if (!(coarse_stiffness > 0 && std::isfinite(coarse_stiffness)) || !(coarse_final_stiffness > 0 && std::isfinite(coarse_final_stiffness)))
+    return bad("coarse_stiffness and coarse_final_stiffness must be > 0");
+  if (!(coarse_normal_angle_deg > 0 && coarse_normal_angle_deg <= 180)) return bad("coarse_normal_angle_deg must be in (0, 180]");
+  if (!(coarse_point_weight >= 0 && std::isfinite(coarse_point_weight))) return bad("coarse_point_weight must be >= 0");
   return true;
 }
 

@@ -5,6 +5,7 @@
 //   fit_alignment.cpp    without markers: similarity alignment (trimmed ICP with scale)
 //   fit_initial.cpp      stage 1: initial deformation from the markers, global scale (§5.2);
 //                        orientation of estimated normals by the posed template
+//   fit_coarse.cpp       coarse stage: stiffness-annealed non-rigid ICP of a deformation graph
 //   fit_matching.cpp     the §5.3 kernel: matching every vertex against the cloud
 //   fit_iterate.cpp      stage 2: the iterative fit (matching, constraints, solve, convergence)
 //   fit_surface_steps.cpp  §5.5 inside the iterations: adaptive subdivision, tangential fairing
@@ -66,6 +67,7 @@ struct FitState {
   Eigen::MatrixX3d target;
   std::vector<int> prop_ids;         ///< per vertex: id of its propagated constraint (-1: none)
   bool propagation_handled = false;  ///< propagation decided in the loop (done or skipped for good)
+  TriMesh coarse;                    ///< the coarse stage's result: the rest shape of the later stages
 
   /// The template the stages fit: the user's, or its similarity alignment when there are no
   /// markers (align_without_markers).
@@ -100,6 +102,11 @@ void align_without_markers(FitState& s, TriMesh& aligned);
 void initial_pose(FitState& s);
 /// Estimated normals point away from the posed template (and are made consistent if asked).
 void orient_cloud_normals(FitState& s);
+
+// ---- fit_coarse.cpp
+/// Coarse stage (FitParameters::coarse_nodes > 0): embedded deformation graph non-rigid ICP
+/// from s.V; sets s.V, s.V0 and the Laplacian's rotations.
+void coarse_stage(FitState& s);
 
 // ---- fit_matching.cpp
 /// Per-vertex cloud neighbours cached in the frozen phase (see fit_iterate.cpp).

@@ -102,6 +102,7 @@ FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eig
   }
   fit_impl::initial_pose(s);             // stage 1 (+ global scale)
   fit_impl::orient_cloud_normals(s);
+  fit_impl::coarse_stage(s);
   fit_impl::iterate_fit(s);              // stage 2
   fit_impl::propagate_displacements(s);  // stage 3
   fit_impl::detail_rounds(s);

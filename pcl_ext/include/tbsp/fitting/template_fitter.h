@@ -8,6 +8,9 @@
 ///  1. initial deformation with the rotation field (eq. 3.12) from the markers;
 ///  2. global scale λ from ratios of Dijkstra geodesics between markers (§5.2), iterated to a
 ///     fixed point (the thesis does one step; data ×3 out of scale needs a few) and re-solve;
+///  2b. optional coarse stage (coarse_nodes > 0): a deformation graph fitted to the cloud by
+///     stiffness-annealed non-rigid ICP (DeformationGraph), for parts turned about joints; its
+///     result is the rest shape of the steps below;
 ///  3. iterative matching (§5.3): per template vertex the cloud points within r_max whose normals
 ///     deviate ≤ θ_max, averaged with the quadratic B-spline kernel, projected on the vertex
 ///     normal; weighted constraints; re-solve until the largest vertex move < tolerance;
@@ -135,6 +138,28 @@ struct FitParameters {
   /// Without markers: after the aligned fit, this many of its matched vertices (farthest-point
   /// sampled) become markers and the fit runs again with them. Default 30. 0..1000 (0: one pass).
   int auto_markers = 30;
+  /// Nodes of the embedded deformation graph of the coarse stage (a stiffness-annealed
+  /// non-rigid ICP between the initial deformation and the §5.3 iterations; follows parts turned
+  /// about joints; fit_coarse.cpp). Default 0 (off): it pays for pose differences of 30-45°
+  /// and costs a little accuracy where the markers already pose the template well
+  /// (docs/fitting.md). 400 is the measured setting. 0 or 4..20000.
+  int coarse_nodes = 0;
+  /// Rounds of the coarse stage: stiffness and radius fall geometrically over them. Default 5. 1..100.
+  int coarse_rounds = 5;
+  /// Gauss-Newton steps (each with new correspondences) per round at most. Default 6. 1..100.
+  int coarse_steps = 6;
+  /// Correspondence radius of the first round, × d (the last round: max(2 r_max, 1 % d)).
+  /// Default 0.1. (0, 1].
+  double coarse_radius = 0.1;
+  /// Stiffness α of the first / last round (relative: α = 1 weighs the regulariser as much as
+  /// the data in total). Defaults 10 / 0.01. > 0.
+  double coarse_stiffness = 10, coarse_final_stiffness = 0.01;
+  /// Largest angle between a cloud normal and the deformed template's normal in a coarse
+  /// correspondence (degrees). Default 60. (0, 180].
+  double coarse_normal_angle_deg = 60;
+  /// Weight of the point-to-point part of a coarse correspondence (the point-to-plane part has
+  /// weight 1). Default 0.1. ≥ 0.
+  double coarse_point_weight = 0.1;
 
   // ---- propagation (§5.3, final step) ----
   /// Interpolate the matched vertices' displacements harmonically into unmatched ones. Default true.
@@ -231,6 +256,7 @@ struct FitReport {
   Eigen::Matrix4d alignment = Eigen::Matrix4d::Identity();
   double alignment_rotation_deg = 0, alignment_scale = 1, alignment_rms = 0;
   int alignment_iterations = 0;
+  int coarse_nodes = 0, coarse_steps = 0;  ///< coarse stage: graph nodes, Gauss-Newton steps (0: off)
   int auto_markers = 0;  ///< markers taken from the aligned fit for the second pass (FitParameters::auto_markers)
   FitParameters used;                    ///< parameters with the derived values filled in
   Eigen::Index points_total = 0, points_skipped_nonfinite = 0, points_excluded = 0;
@@ -258,7 +284,7 @@ struct FitReport {
   /// before / after, and the edges collapsed
   int pleat_faces_before = 0, pleat_faces_after = 0, pleat_collapses = 0;
   // timings (s)
-  double t_normals = 0, t_search = 0, t_alignment = 0, t_initial = 0, t_scale = 0, t_iterations = 0, t_matching = 0,
+  double t_normals = 0, t_search = 0, t_alignment = 0, t_initial = 0, t_coarse = 0, t_scale = 0, t_iterations = 0, t_matching = 0,
          t_solve = 0, t_propagation = 0, t_detail = 0, t_remeshing = 0, t_fairing = 0, t_metrics = 0, t_total = 0;
   int detail_iterations_run = 0;         ///< matching / solve steps of the detail rounds, all rounds
   Eigen::Index detail_surface_constraints = 0;  ///< data -> surface constraints, all detail rounds
