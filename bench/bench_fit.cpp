@@ -36,6 +36,7 @@
 #include "tbsp/fitting/template_fitter.h"
 #include "tbsp/io/cloud_io.h"
 #include "tbsp/io/mesh_io.h"
+#include "tbsp/io/range_scan_conf.h"
 #include "tbsp/mesh/pcl_conversions.h"
 #include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/mesh/point_search.h"
@@ -49,6 +50,26 @@ void row(const char* model, std::size_t markers, Eigen::Index verts, Eigen::Inde
   if (r.coarse_nodes > 0) std::snprintf(coarse, sizeof coarse, " (coarse stage %.2f s, %d steps)", r.t_coarse, r.coarse_steps);
   std::printf("| %-34s | %3zu | %6ld | %7ld | %6.3f%% | %6.3f%% | %2d | %6.2f | %s%s\n", model, markers, (long)verts, (long)pts,
               100 * r.hausdorff_rel, 100 * r.p99 / r.bbox_diagonal, r.iterations, r.t_total, extra, coarse);
+}
+
+double percentile(Eigen::VectorXd d, double q) {
+  std::sort(d.data(), d.data() + d.size());
+  return d(std::min<Eigen::Index>(d.size() - 1, Eigen::Index(q * double(d.size()))));
+}
+
+// k markers spread over the scanned side (farthest_point_sample): template vertices (at their
+// positions `Vref`, in the scan's frame) within 1 mm of the scan, each to its nearest scan point
+std::vector<FitMarker> scan_markers(const Eigen::MatrixX3d& Vref, const Eigen::MatrixX3d& P, int k) {
+  const PointSearch tree(P);
+  std::vector<int> cand;
+  for (Eigen::Index v = 0; v < Vref.rows(); ++v) {
+    double d2;
+    tree.nearest(Vref.row(v).transpose(), &d2);
+    if (d2 < 1e-6) cand.push_back(int(v));
+  }
+  std::vector<FitMarker> markers;
+  for (int v : farthest_point_sample(Vref, cand, k)) markers.push_back({v, tree.nearest(Vref.row(v).transpose())});
+  return markers;
 }
 
 double hole_error(const synth::Scenario& s, const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
@@ -95,7 +116,10 @@ int main(int argc, char** argv) {
   FitParameters base;
   std::vector<double> articulated;  // --articulated DEG (repeatable): bunny head + ears turned by DEG
   std::string save_target;
-  bool hole_oracle = false;  // --hole-oracle: with --articulated, the floor of rigidity-prior hole filling
+  std::string save_fit;  // --save-fit PREFIX: the real-scan rows' fits as PREFIX_DEG[_coarse].ply
+  bool hole_oracle = false;
+  std::vector<double> real_tilts;  // --real-tilt DEG (repeatable; default 15)
+  int real_markers = 16;  // --hole-oracle: with --articulated, the floor of rigidity-prior hole filling
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--no-poisson") poisson = false;
@@ -109,7 +133,10 @@ int main(int argc, char** argv) {
     else if (a == "--detail-rounds" && i + 1 < argc) base.detail_rounds = std::atoi(argv[++i]);
     else if (a == "--articulated" && i + 1 < argc) articulated.push_back(std::atof(argv[++i]));
     else if (a == "--save-target" && i + 1 < argc) save_target = argv[++i];
+    else if (a == "--save-fit" && i + 1 < argc) save_fit = argv[++i];
     else if (a == "--hole-oracle") hole_oracle = true;
+    else if (a == "--real-tilt" && i + 1 < argc) real_tilts.push_back(std::atof(argv[++i]));
+    else if (a == "--real-markers" && i + 1 < argc) real_markers = std::max(3, std::atoi(argv[++i]));
     else if (a == "--max-iterations" && i + 1 < argc) base.max_iterations = std::atoi(argv[++i]);
     else if (a == "--coarse" && i + 1 < argc) base.coarse_nodes = std::atoi(argv[++i]);
     else if (a == "--coarse-stiffness" && i + 2 < argc) { base.coarse_stiffness = std::atof(argv[++i]); base.coarse_final_stiffness = std::atof(argv[++i]); }
@@ -121,11 +148,12 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N] "
                            "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--max-iterations N] "
-                           "[--articulated DEG]... [--save-target FILE] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
+                           "[--articulated DEG]... [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
                            "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W]\n");
       return 2;
     }
   }
+  if (real_tilts.empty()) real_tilts.push_back(15);
   if (!base.isValid()) {
     std::string why;
     base.isValid(&why);
@@ -143,30 +171,46 @@ int main(int argc, char** argv) {
     for (std::size_t i = 0; i < cloud->size(); ++i) P.row(Eigen::Index(i)) << (*cloud)[i].x, (*cloud)[i].y, (*cloud)[i].z;
     // markers: 12 template vertices spread over the scanned side, each to its nearest scan point
     // (template and scan share the world frame, see the data MANIFEST)
-    const PointSearch tree(P);
-    std::vector<FitMarker> markers;
-    std::vector<int> cand;
-    for (Eigen::Index v = 0; v < t.V.rows(); ++v) {
-      double d2;
-      tree.nearest(t.V.row(v).transpose(), &d2);
-      if (d2 < 1e-6) cand.push_back(int(v));  // within 1 mm of the scan
-    }
-    Eigen::VectorXd d = Eigen::VectorXd::Constant(Eigen::Index(cand.size()), 1e300);
-    int pick = 0;
-    for (int k = 0; k < 12; ++k) {
-      const int v = cand[std::size_t(pick)];
-      FitMarker m;
-      m.template_vertex = v;
-      m.cloud_index = tree.nearest(t.V.row(v).transpose());
-      markers.push_back(m);
-      for (std::size_t c = 0; c < cand.size(); ++c) d(Eigen::Index(c)) = std::min(d(Eigen::Index(c)), (t.V.row(cand[c]) - t.V.row(v)).norm());
-      Eigen::Index arg;
-      d.maxCoeff(&arg);
-      pick = int(arg);
-    }
+    const std::vector<FitMarker> markers = scan_markers(t.V, P, 12);
     TriMesh fit;
     const FitReport r = timed_fit(repeat, t, P, Eigen::MatrixX3d(), markers, fit, nullptr, base);
     row("bunny, real scan bun000 (1 view)", markers.size(), t.V.rows(), P.rows(), r, "normals estimated; back side from the template");
+  }
+  // 1b. real scans bun000 + bun045 + bun090 in one frame (bun.conf), the template's head and ears
+  // tilted by DEG (--real-tilt, repeatable; default 15); markers: farthest-point template vertices on
+  // the scanned side, each to the scan point nearest to where that vertex lies untilted (a
+  // hand-picked correspondence, not the truth). Reference: the scans' own p99 distance to the
+  // bun_zipper reconstruction. The default fit, and the coarse stage + 4 detail rounds.
+  for (double deg : real_tilts) {
+    char name[96];
+    std::snprintf(name, sizeof name, "bunny, real scans 000+045+090, template head+ears tilted %g deg", deg);
+    if (!wanted(name)) continue;
+    const std::string dir = kData + "/meshes/dengnantianjie__3dcoursework/bunny/";
+    // bun.conf: tbsp/io/range_scan_conf.h (the quaternion's inverse rotation, as the data MANIFEST says)
+    const Eigen::MatrixX3d P = read_registered_range_scans(dir + "data/bun.conf", {"bun000.ply", "bun045.ply", "bun090.ply"});
+    const TriMesh zipper = read_mesh(dir + "reconstruction/bun_zipper.ply");
+    const double diag = (P.colwise().maxCoeff() - P.colwise().minCoeff()).norm();
+    const double ref99 = percentile(point_mesh_distances(zipper.V, zipper.F, P), 0.99) / diag;
+    const TriMesh t = read_mesh(kData + "/meshes/libigl__libigl-tutorial-data/bunny.off");
+    TriMesh tilted = t;
+    tilted.V = synth::articulate(t.V, synth::bunny_head_and_ears(deg));
+    const std::vector<FitMarker> markers = scan_markers(t.V, P, real_markers);
+    std::vector<std::pair<const char*, FitParameters>> variants = {{"default", base}};
+    FitParameters cp = base;
+    if (cp.coarse_nodes == 0) cp.coarse_nodes = 400;
+    cp.detail_rounds = std::max(cp.detail_rounds, 4);
+    variants.push_back({"coarse stage + 4 detail rounds", cp});
+    for (const auto& [what, params] : variants) {
+      TriMesh fit;
+      const FitReport r = timed_fit(repeat, tilted, P, Eigen::MatrixX3d(), markers, fit, nullptr, params);
+      const Eigen::VectorXd d = point_mesh_distances(fit.V, fit.F, P);
+      const double p99 = percentile(d, 0.99) / diag;
+      char note[256];
+      std::snprintf(note, sizeof note, "%s: scan->fit p99 %.3f%%, max %.3f%%; scans->bun_zipper p99 %.3f%% (+0.05%% = %.3f%%: %s)", what,
+                    100 * p99, 100 * d.maxCoeff() / diag, 100 * ref99, 100 * (ref99 + 5e-4), p99 <= ref99 + 5e-4 ? "within" : "NOT within");
+      row(name, markers.size(), t.V.rows(), P.rows(), r, note);
+      if (!save_fit.empty()) write_mesh(save_fit + "_" + std::to_string(int(deg)) + (params.coarse_nodes > 0 && base.coarse_nodes == 0 ? "_coarse" : "") + ".ply", fit);
+    }
   }
   // 2a. articulated ground truth (fitting v2 issue): the bunny's head and ears turned by DEG
   // about their joints (smooth falloff), x1.1, sigma 0.2 % noise, no outliers, 25 % hole,

@@ -30,6 +30,7 @@
 #include "tbsp/io/mocap_io.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/io/tet_mesh_io.h"
+#include "tbsp/io/range_scan_conf.h"
 #include "tbsp/plugins/constraints_json.h"
 #include "tbsp/plugins/fit_json.h"
 #include "tbsp/plugins/json_file.h"
@@ -102,6 +103,7 @@ const std::map<std::string, Target>& targets() {
       {"pcd", {"in.pcd", [](const std::string& p) { read_cloud_normals(p); }}},
       {"cloud_ply", {"in.ply", [](const std::string& p) { read_cloud_normals(p); }}},
       {"tetmesh", {"in.mesh", [](const std::string& p) { read_tet_mesh(p); }}},
+      {"conf", {"in.conf", [](const std::string& p) { read_range_scan_conf(p); }}},
       {"middlebury", {"in_par.txt", [](const std::string& p) { read_middlebury_par(p); }}},
       {"pmatrix", {"in.txt", [](const std::string& p) { read_projection_matrix(p, 640, 480, "c"); }}},
       {"stereo_calib", {"calib.txt", [](const std::string& p) { read_middlebury_stereo_calib(p); }}},
