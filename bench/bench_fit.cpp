@@ -5,7 +5,8 @@
 // (--only: run just the rows whose model name contains WORD, e.g. armadillo; --seed / --markers:
 // of the ground-truth scenarios (default 1 / 20); --propagation-weight, --rim-rejection: of every
 // fit (defaults ½, 0.5))
-//   --articulated DEG (repeatable): the articulated bunny (head and ears turned by DEG, ×1.1, 25 %
+//   --articulated DEG (repeatable): the articulated model (--articulated-model bunny: head and ears;
+//     armadillo: forearms and a knee; human: the SMPL body's arms, head and a knee; turned by DEG, ×1.1, 25 %
 //     hole, no outliers); --save-target FILE writes its true shape; --hole-oracle adds the hole
 //     floor of a rigidity prior (a deformation graph driven by the true positions outside the hole)
 //   --coarse N / --coarse-stiffness A0 A1 / --coarse-rounds N / --coarse-steps N / --coarse-radius R /
@@ -116,8 +117,9 @@ int main(int argc, char** argv) {
   FitParameters base;
   std::vector<double> articulated;  // --articulated DEG (repeatable): bunny head + ears turned by DEG
   std::string save_target;
-  std::string save_fit;  // --save-fit PREFIX: the real-scan rows' fits as PREFIX_DEG[_coarse].ply
+  std::string save_fit;  // --save-fit PREFIX: the real-scan rows' fits as PREFIX_DEG[_coarse].ply, the articulated ones' as PREFIX_DEG.obj
   bool hole_oracle = false;
+  std::string articulated_model = "bunny";  // --articulated-model bunny|armadillo|human
   std::vector<double> real_tilts;  // --real-tilt DEG (repeatable; default 15)
   int real_markers = 16;  // --hole-oracle: with --articulated, the floor of rigidity-prior hole filling
   for (int i = 1; i < argc; ++i) {
@@ -135,6 +137,7 @@ int main(int argc, char** argv) {
     else if (a == "--save-target" && i + 1 < argc) save_target = argv[++i];
     else if (a == "--save-fit" && i + 1 < argc) save_fit = argv[++i];
     else if (a == "--hole-oracle") hole_oracle = true;
+    else if (a == "--articulated-model" && i + 1 < argc) articulated_model = argv[++i];
     else if (a == "--real-tilt" && i + 1 < argc) real_tilts.push_back(std::atof(argv[++i]));
     else if (a == "--real-markers" && i + 1 < argc) real_markers = std::max(3, std::atoi(argv[++i]));
     else if (a == "--max-iterations" && i + 1 < argc) base.max_iterations = std::atoi(argv[++i]);
@@ -148,7 +151,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N] "
                            "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--max-iterations N] "
-                           "[--articulated DEG]... [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
+                           "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
                            "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W]\n");
       return 2;
     }
@@ -215,16 +218,22 @@ int main(int argc, char** argv) {
   // 2a. articulated ground truth (fitting v2 issue): the bunny's head and ears turned by DEG
   // about their joints (smooth falloff), x1.1, sigma 0.2 % noise, no outliers, 25 % hole,
   // farthest-point markers
+  struct Articulated { const char* name; const char* path; int points; std::vector<synth::Joint> (*joints)(double); };
+  const Articulated arts[] = {{"bunny articulated: head+ears", "/meshes/libigl__libigl-tutorial-data/bunny.off", 30000, &synth::bunny_head_and_ears},
+                              {"armadillo articulated: forearms+knee", "/meshes/libigl__libigl-tutorial-data/armadillo.obj", 100000, &synth::armadillo_limbs},
+                              {"human (SMPL) articulated: arms+head+knee", "/meshes/odedstein__meshes/objects/human/human_man.obj", 30000, &synth::human_limbs}};
+  for (const Articulated& art : arts)
   for (double deg : articulated) {
-    const TriMesh t = read_mesh(kData + "/meshes/libigl__libigl-tutorial-data/bunny.off");
+    if (art.name != articulated_model && std::string(art.name).find(articulated_model) != 0) continue;
+    const TriMesh t = read_mesh(kData + art.path);
     synth::ScenarioOptions o;
-    o.points = 30000;
+    o.points = art.points;
     o.seed = seed;
     o.markers = n_markers;
     o.bend_deg = o.twist_deg = 0;
     o.scale = 1.1;
     o.outliers = 0;
-    o.joints = synth::bunny_head_and_ears(deg);
+    o.joints = art.joints(deg);
     const synth::Scenario s = synth::make_scenario(t, o);
     if (!save_target.empty()) {
       TriMesh target = t;
@@ -234,8 +243,9 @@ int main(int argc, char** argv) {
     TriMesh fit;
     const FitReport r = timed_fit(repeat, s.templ, s.P, s.N, s.markers, fit, nullptr, base);
     const synth::ScenarioErrors e = synth::evaluate(s, fit);
-    char name[96], note[256];
-    std::snprintf(name, sizeof name, "bunny articulated: head+ears %g deg, x1.1, hole 25%%", deg);
+    if (!save_fit.empty()) write_mesh(save_fit + "_" + std::to_string(int(deg)) + ".obj", fit);
+    char name[128], note[256];
+    std::snprintf(name, sizeof name, "%s %g deg, x1.1, hole 25%%", art.name, deg);
     std::snprintf(note, sizeof note, "clean Hausdorff %.3f%%; hole: surface %.3f%%, per vertex %.3f%%", 100 * e.hausdorff_clean_rel,
                   100 * hole_error(s, fit.V, fit.F), 100 * e.hole_mean_rel);
     row(name, s.markers.size(), t.V.rows(), s.P.rows(), r, note);

@@ -6,6 +6,7 @@
 #include <numeric>
 #include <random>
 
+#include "tbsp/core/error.h"
 #include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/mesh/point_search.h"
 
@@ -45,7 +46,49 @@ Eigen::MatrixX3d bend_twist_scale(const Eigen::MatrixX3d& V, const ScenarioOptio
   return out;
 }
 
+namespace {
+// Blend weight (smoothstep across ±falloff of the joint's plane) of every vertex of the rest
+// shape; with a seed, zero outside the part connected to the seed through vertices of weight > 0.
+Eigen::VectorXd joint_weights(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Joint& J) {
+  const double w = std::max(J.falloff, 1e-12);
+  Eigen::VectorXd s(V.rows());
+  for (Eigen::Index i = 0; i < V.rows(); ++i) {
+    const double t = std::clamp(((V.row(i).transpose() - J.centre).dot(J.side.normalized()) / w + 1) / 2, 0.0, 1.0);
+    s(i) = t * t * (3 - 2 * t);
+  }
+  if (!J.seed.allFinite()) return s;
+  if (F.rows() == 0) throw InvalidInput("synth::articulate: a joint with a seed needs the faces (articulate(V, F, joints))");
+  Eigen::Index start = -1;
+  double best = 1e300;
+  for (Eigen::Index i = 0; i < V.rows(); ++i)
+    if (s(i) > 0 && (V.row(i).transpose() - J.seed).squaredNorm() < best) { best = (V.row(i).transpose() - J.seed).squaredNorm(); start = i; }
+  if (start < 0) throw InvalidInput("synth::articulate: no vertex on the turning side of a joint with a seed");
+  std::vector<std::vector<int>> adj(std::size_t(V.rows()));
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = F(f, k), b = F(f, (k + 1) % 3);
+      if (s(a) > 0 && s(b) > 0) { adj[std::size_t(a)].push_back(b); adj[std::size_t(b)].push_back(a); }
+    }
+  std::vector<char> reached(std::size_t(V.rows()), 0);
+  std::vector<int> stack{int(start)};
+  reached[std::size_t(start)] = 1;
+  while (!stack.empty()) {
+    const int v = stack.back();
+    stack.pop_back();
+    for (int u : adj[std::size_t(v)])
+      if (!reached[std::size_t(u)]) { reached[std::size_t(u)] = 1; stack.push_back(u); }
+  }
+  for (Eigen::Index i = 0; i < V.rows(); ++i)
+    if (!reached[std::size_t(i)]) s(i) = 0;
+  return s;
+}
+}  // namespace
+
 Eigen::MatrixX3d articulate(const Eigen::MatrixX3d& V, const std::vector<Joint>& joints) {
+  return articulate(V, Eigen::MatrixX3i(), joints);
+}
+
+Eigen::MatrixX3d articulate(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::vector<Joint>& joints) {
   Eigen::MatrixX3d out = V;
   // each joint's frame moves with the joints before it: track its centre through them
   std::vector<Eigen::Vector3d> centre(joints.size()), axis(joints.size()), side(joints.size());
@@ -56,13 +99,11 @@ Eigen::MatrixX3d articulate(const Eigen::MatrixX3d& V, const std::vector<Joint>&
   }
   for (std::size_t j = 0; j < joints.size(); ++j) {
     const Joint& J = joints[j];
-    const double w = std::max(J.falloff, 1e-12);
+    // which side of the joint: measured on the rest shape, so parts keep their membership
+    const Eigen::VectorXd s = joint_weights(V, F, J);
     for (Eigen::Index i = 0; i < V.rows(); ++i) {
-      // which side of the joint: measured on the rest shape, so parts keep their membership
-      const double t = std::clamp(((V.row(i).transpose() - J.centre).dot(J.side.normalized()) / w + 1) / 2, 0.0, 1.0);
-      const double s = t * t * (3 - 2 * t);
-      if (s == 0) continue;
-      const Eigen::Matrix3d R = Eigen::AngleAxisd(s * J.angle_deg * M_PI / 180, axis[j]).toRotationMatrix();
+      if (s(i) == 0) continue;
+      const Eigen::Matrix3d R = Eigen::AngleAxisd(s(i) * J.angle_deg * M_PI / 180, axis[j]).toRotationMatrix();
       out.row(i) = (centre[j] + R * (out.row(i).transpose() - centre[j])).transpose();
     }
     // later joints on this one's side follow it
@@ -93,10 +134,38 @@ std::vector<Joint> bunny_head_and_ears(double angle_deg) {
   return {head, ears};
 }
 
+namespace {
+Joint joint(Eigen::Vector3d centre, Eigen::Vector3d side, Eigen::Vector3d axis, double falloff, double angle_deg, Eigen::Vector3d seed) {
+  Joint J;
+  J.centre = centre;
+  J.side = side;
+  J.axis = axis;
+  J.falloff = falloff;
+  J.angle_deg = angle_deg;
+  J.seed = seed;
+  return J;
+}
+}  // namespace
+
+std::vector<Joint> armadillo_limbs(double a) {
+  const Eigen::Vector3d X = Eigen::Vector3d::UnitX(), Y = Eigen::Vector3d::UnitY(), Z = Eigen::Vector3d::UnitZ();
+  return {joint({0.27, 0.18, 0.10}, X, Z, 0.05, a, {0.36, 0.24, 0.23}),        // right forearm raised
+          joint({-0.27, 0.16, 0.035}, -X, Z, 0.05, a, {-0.37, 0.24, 0.145}),   // left forearm lowered
+          joint({-0.18, -0.36, -0.07}, -Y, X, 0.06, -a, {-0.17, -0.56, 0.0})};  // left knee straightens
+}
+
+std::vector<Joint> human_limbs(double a) {
+  const Eigen::Vector3d X = Eigen::Vector3d::UnitX(), Y = Eigen::Vector3d::UnitY(), Z = Eigen::Vector3d::UnitZ();
+  return {joint({0.22, 1.43, -0.04}, X, Z, 0.04, -a, {0.85, 1.42, -0.03}),     // left arm lowered
+          joint({-0.22, 1.43, -0.04}, -X, Z, 0.04, -a, {-0.85, 1.42, -0.03}),  // right arm raised
+          joint({0.0, 1.55, 0.0}, Y, X, 0.04, a, {0.0, 1.75, 0.0}),            // head nods
+          joint({-0.1, 0.47, -0.01}, -Y, X, 0.04, a, {-0.12, 0.03, 0.05})};    // right knee bends
+}
+
 Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
   Scenario s;
   s.templ = templ;
-  s.target = bend_twist_scale(o.joints.empty() ? templ.V : articulate(templ.V, o.joints), o);
+  s.target = bend_twist_scale(o.joints.empty() ? templ.V : articulate(templ.V, templ.F, o.joints), o);
   s.diag = bbox_diagonal(s.target);
   std::mt19937 rng(o.seed);
   const Eigen::MatrixX3i& F = templ.F;

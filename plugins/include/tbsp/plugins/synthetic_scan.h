@@ -5,6 +5,7 @@
 /// optional misregistered fragments, and markers. Used by the tests, the benchmarks, the sample
 /// data (`tbsp synth-scan`) and the demo. Deterministic for a given seed.
 #include <Eigen/Core>
+#include <limits>
 #include <vector>
 
 #include "tbsp/fitting/template_fitter.h"
@@ -16,22 +17,38 @@ namespace tbsp::synth {
 /// of the plane through `centre` with normal `side` turns by `angle_deg` about the line through
 /// `centre` along `axis`; across ±`falloff` (length) of that plane the angle blends smoothly
 /// (smoothstep), so the surface bends instead of tearing. Joints apply in order (a later
-/// joint's part is moved by the earlier ones first: give parents before children).
+/// joint's part is moved by the earlier ones first: give parents before children). With a
+/// finite `seed`, only the part connected (through mesh edges between vertices on the turning
+/// side) to the vertex nearest the seed turns: one limb, not everything beyond the plane.
 struct Joint {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
   Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
   Eigen::Vector3d side = Eigen::Vector3d::UnitY();
   double falloff = 0.01;
   double angle_deg = 0;
+  Eigen::Vector3d seed = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
 };
 
 /// \brief Applies the joints to V (template coordinates), each about its centre as moved by
-/// the joints before it.
+/// the joints before it. \throws InvalidInput for a joint with a seed (those need the faces) or
+/// a seed with no vertex on the joint's turning side.
 Eigen::MatrixX3d articulate(const Eigen::MatrixX3d& V, const std::vector<Joint>& joints);
+/// \brief The same with the faces, which joints with a seed need.
+Eigen::MatrixX3d articulate(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::vector<Joint>& joints);
 
 /// \brief Joints of the libigl bunny (bunny.off, the bun_zipper frame): the head with its ears
 /// nods about the neck, then the ears tilt about their base, both by `angle_deg`.
 std::vector<Joint> bunny_head_and_ears(double angle_deg);
+
+/// \brief Joints of the libigl Armadillo (armadillo.obj, 43k vertices, y up): the right forearm
+/// raised, the left one lowered, the left knee straightened, each by `angle_deg`
+/// (one limb each: the joints carry seeds; use articulate(V, F, joints)).
+std::vector<Joint> armadillo_limbs(double angle_deg);
+
+/// \brief Joints of the SMPL human in T-pose (odedstein meshes human_man.obj / human_woman.obj,
+/// 6890 vertices, metres, y up, face +z): the left arm lowered and the right arm raised at the
+/// shoulder, the head nodding, the right knee bending, each by `angle_deg` (with seeds).
+std::vector<Joint> human_limbs(double angle_deg);
 
 struct ScenarioOptions {
   double bend_deg = 60, twist_deg = 60, scale = 2.0;
