@@ -74,27 +74,6 @@ std::vector<FitMarker> scan_markers(const Eigen::MatrixX3d& Vref, const Eigen::M
   return markers;
 }
 
-// The template roughly in place, as a user without markers has it (fitting v2 issue): the
-// scenario turned by 8 deg about a tilted axis through its centre (its translation and scale set
-// by the caller to ~3.7 % of the diagonal and x1.05).
-void turn_scenario(synth::Scenario& s, double deg) {
-  const Eigen::Matrix3d R = Eigen::AngleAxisd(deg * M_PI / 180, Eigen::Vector3d(1, 2, 0.5).normalized()).toRotationMatrix();
-  const Eigen::RowVector3d c = s.target.colwise().mean();
-  auto turn = [&](Eigen::MatrixX3d& X, bool about_centre) {
-    for (Eigen::Index i = 0; i < X.rows(); ++i) {
-      if (!X.row(i).allFinite()) continue;  // (clean rows of outliers are NaN)
-      const Eigen::RowVector3d x = X.row(i);
-      X.row(i) = about_centre ? Eigen::RowVector3d((x - c) * R.transpose() + c) : Eigen::RowVector3d(x * R.transpose());
-    }
-  };
-  turn(s.target, true);
-  turn(s.P, true);
-  turn(s.clean, true);
-  turn(s.N, false);
-  for (auto& m : s.markers)
-    if (m.cloud_index < 0) m.position = R * (m.position - c.transpose()) + c.transpose();
-}
-
 double hole_error(const synth::Scenario& s, const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
   // mean distance from the true surface inside the hole (hole vertices of the target) to a mesh
   const MeshDistance md(V, F);
@@ -263,7 +242,7 @@ int main(int argc, char** argv) {
       o.translation = Eigen::Vector3d(0.03, -0.02, 0.01);
     }
     synth::Scenario s = synth::make_scenario(t, o);
-    if (markerless) turn_scenario(s, 8);
+    if (markerless) synth::turn_scenario(s, 8);
     if (!save_target.empty()) {
       TriMesh target = t;
       target.V = s.target;

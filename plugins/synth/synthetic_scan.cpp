@@ -274,6 +274,24 @@ Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
   return s;
 }
 
+void turn_scenario(Scenario& s, double deg) {
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(deg * M_PI / 180, Eigen::Vector3d(1, 2, 0.5).normalized()).toRotationMatrix();
+  const Eigen::RowVector3d c = s.target.colwise().mean();
+  auto turn = [&](Eigen::MatrixX3d& X, bool about_centre) {
+    for (Eigen::Index i = 0; i < X.rows(); ++i) {
+      if (!X.row(i).allFinite()) continue;  // (clean rows of outliers are NaN)
+      const Eigen::RowVector3d x = X.row(i);
+      X.row(i) = about_centre ? Eigen::RowVector3d((x - c) * R.transpose() + c) : Eigen::RowVector3d(x * R.transpose());
+    }
+  };
+  turn(s.target, true);
+  turn(s.P, true);
+  turn(s.clean, true);
+  turn(s.N, false);
+  for (auto& m : s.markers)
+    if (m.cloud_index < 0) m.position = R * (m.position - c.transpose()) + c.transpose();
+}
+
 ScenarioErrors evaluate(const Scenario& s, const TriMesh& fit) {
   ScenarioErrors e{};
   const MeshDistance md(fit.V, fit.F);

@@ -82,6 +82,11 @@ Eigen::MatrixX3d bend_twist_scale(const Eigen::MatrixX3d& V, const ScenarioOptio
 
 Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o);
 
+/// \brief Turns a whole scenario (truth, cloud, clean samples, normals, free marker positions)
+/// by `deg` about the axis (1, 2, 0.5) through the truth's centre: with a small translation and
+/// scale in the options, a template "roughly in place" as a user without markers has it.
+void turn_scenario(Scenario& s, double deg);
+
 struct ScenarioErrors {
   double hausdorff_clean_rel;      // max distance of noise-free inlier samples to the fit / diag
   double hausdorff_noisy_rel;      // same with the noisy inlier points
