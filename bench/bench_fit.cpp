@@ -8,7 +8,8 @@
 //   --articulated DEG (repeatable): the articulated model (--articulated-model bunny: head and ears;
 //     armadillo: forearms and a knee; human: the SMPL body's arms, head and a knee; turned by DEG, ×1.1, 25 %
 //     hole, no outliers); --markerless: instead x1.05, 3.7 % off and turned by 8 deg, fitted without
-//     markers and (next row) with them; --save-target FILE writes its true shape; --hole-oracle adds the hole
+//     markers and (next row) with them; --hole-axis N: the hole across principal axis N (default 1);
+//     --save-target FILE writes its true shape; --hole-oracle adds the hole
 //     floor of a rigidity prior (a deformation graph driven by the true positions outside the hole)
 //   --coarse N / --coarse-stiffness A0 A1 / --coarse-rounds N / --coarse-steps N / --coarse-radius R /
 //   --coarse-angle DEG / --coarse-point-weight W: the coarse stage (FitParameters::coarse_*);
@@ -121,6 +122,7 @@ int main(int argc, char** argv) {
   std::string save_fit;  // --save-fit PREFIX: the real-scan rows' fits as PREFIX_DEG[_coarse].ply, the articulated ones' as PREFIX_DEG.obj
   bool hole_oracle = false;
   std::string articulated_model = "bunny";
+  int hole_axis = 1;  // --hole-axis N: the articulated rows' hole across principal axis N (ScenarioOptions::hole_axis)
   bool markerless = false;  // --markerless: articulated rows roughly in place (8 deg, 3.7 %, x1.05), fitted without and with markers  // --articulated-model bunny|armadillo|human
   std::vector<double> real_tilts;  // --real-tilt DEG (repeatable; default 15)
   int real_markers = 16;  // --hole-oracle: with --articulated, the floor of rigidity-prior hole filling
@@ -140,6 +142,7 @@ int main(int argc, char** argv) {
     else if (a == "--save-fit" && i + 1 < argc) save_fit = argv[++i];
     else if (a == "--hole-oracle") hole_oracle = true;
     else if (a == "--markerless") markerless = true;
+    else if (a == "--hole-axis" && i + 1 < argc) hole_axis = std::clamp(std::atoi(argv[++i]), 0, 2);
     else if (a == "--articulated-model" && i + 1 < argc) articulated_model = argv[++i];
     else if (a == "--real-tilt" && i + 1 < argc) real_tilts.push_back(std::atof(argv[++i]));
     else if (a == "--real-markers" && i + 1 < argc) real_markers = std::max(3, std::atoi(argv[++i]));
@@ -154,7 +157,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N] "
                            "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--max-iterations N] "
-                           "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
+                           "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--hole-axis 0|1|2] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
                            "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W]\n");
       return 2;
     }
@@ -237,6 +240,7 @@ int main(int argc, char** argv) {
     o.scale = 1.1;
     o.outliers = 0;
     o.joints = art.joints(deg);
+    o.hole_axis = hole_axis;
     if (markerless) {
       o.scale = 1.05;
       o.translation = Eigen::Vector3d(0.03, -0.02, 0.01);

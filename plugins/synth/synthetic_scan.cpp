@@ -14,7 +14,7 @@ namespace tbsp::synth {
 
 namespace {
 struct Frame {
-  Eigen::Vector3d c, axis, perp;
+  Eigen::Vector3d c, axis, perp, third;
   double length;
 };
 Frame principal_frame(const Eigen::MatrixX3d& V) {
@@ -24,6 +24,7 @@ Frame principal_frame(const Eigen::MatrixX3d& V) {
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(X.transpose() * X);
   f.axis = es.eigenvectors().col(2);
   f.perp = es.eigenvectors().col(1);
+  f.third = es.eigenvectors().col(0);
   const Eigen::VectorXd s = X * f.axis;
   f.length = s.maxCoeff() - s.minCoeff();
   return f;
@@ -163,6 +164,8 @@ std::vector<Joint> human_limbs(double a) {
 }
 
 Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
+  if (o.hole_axis < 0 || o.hole_axis > 2)
+    throw InvalidInput("synth::make_scenario: hole_axis " + std::to_string(o.hole_axis) + " is not 0, 1 or 2 (a principal axis)");
   Scenario s;
   s.templ = templ;
   s.target = bend_twist_scale(o.joints.empty() ? templ.V : articulate(templ.V, templ.F, o.joints), o);
@@ -174,7 +177,7 @@ Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
   Eigen::VectorXd key(F.rows()), area(F.rows());
   for (Eigen::Index f = 0; f < F.rows(); ++f) {
     const Eigen::Vector3d c = (templ.V.row(F(f, 0)) + templ.V.row(F(f, 1)) + templ.V.row(F(f, 2))).transpose() / 3.0;
-    key(f) = (c - fr.c).dot(fr.perp);
+    key(f) = (c - fr.c).dot(o.hole_axis == 0 ? fr.axis : o.hole_axis == 2 ? fr.third : fr.perp);
     const Eigen::Vector3d a = s.target.row(F(f, 0)), b = s.target.row(F(f, 1)), d = s.target.row(F(f, 2));
     area(f) = 0.5 * (b - a).cross(d - a).norm();
   }

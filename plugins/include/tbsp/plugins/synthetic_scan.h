@@ -57,6 +57,8 @@ struct ScenarioOptions {
   double noise = 0.002;            // Gaussian σ as a fraction of the target's bbox diagonal
   double outliers = 0.10;          // fraction of the final cloud that is uniform outliers
   double hole = 0.25;              // fraction of the surface area removed
+  int hole_axis = 1;               // the hole lies beyond a plane across this principal axis of the
+                                   // template (0: longest, 1: second, 2: shortest)
   int markers = 20;
   double fragment_offset = 0.0;    // > 0: split the cloud in two halves, shift one by this × diag
   unsigned seed = 1;
