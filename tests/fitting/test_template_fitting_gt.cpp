@@ -12,6 +12,7 @@
 
 #include "tbsp/plugins/synthetic_scan.h"
 #include "test_util.h"
+#include "tbsp/core/error.h"
 #include "tbsp/fitting/template_fitter.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/range_scan_conf.h"
@@ -339,6 +340,29 @@ TEST(TemplateFittingGroundTruth, WithoutMarkersARoughlyPlacedTemplateIsAlignedAn
     EXPECT_LE(o.err.hole_mean_rel, 0.013) << "seed " << seed;
     EXPECT_EQ(o.flipped_vs_truth, 0) << "seed " << seed;
   }
+}
+
+// ScenarioOptions::hole_axis: the hole lies across the chosen principal axis (a different set
+// of vertices, the same removed area); an axis outside 0-2 is refused.
+TEST(SyntheticScenario, HoleAxisChoosesWhereTheHoleIs) {
+  TBSP_REQUIRE_FILE(test::shared(kBunny));
+  const TriMesh t = read_mesh(test::shared(kBunny));
+  synth::ScenarioOptions o;
+  o.points = 2000;
+  const synth::Scenario a = synth::make_scenario(t, o);
+  o.hole_axis = 2;
+  const synth::Scenario b = synth::make_scenario(t, o);
+  EXPECT_NEAR(a.hole_area_fraction, 0.25, 0.01);
+  EXPECT_NEAR(b.hole_area_fraction, 0.25, 0.01);
+  std::size_t both = 0, in_a = 0;
+  for (std::size_t v = 0; v < a.hole_vertex.size(); ++v) {
+    in_a += a.hole_vertex[v] != 0;
+    both += a.hole_vertex[v] && b.hole_vertex[v];
+  }
+  EXPECT_GT(in_a, 100u);
+  EXPECT_LT(both, in_a / 2);  // another part of the surface
+  o.hole_axis = 3;
+  EXPECT_THROW(synth::make_scenario(t, o), InvalidInput);
 }
 
 // Markers optional (fitting v2 issue): the articulated bunny (head and ears turned by 15° and
