@@ -1,4 +1,4 @@
-// `tbsp cloth build` (skeleton + bone-heat weights + proxies + clothness -> an AnimatableModel,
+// `tbsp cloth proxies` (collision proxies alone, thesis §10.4), `tbsp cloth build` (skeleton + bone-heat weights + proxies + clothness -> an AnimatableModel,
 // thesis §10.1/§10.4/§10.6) and `tbsp cloth animate` (a model driven by a BVH clip -> meshes).
 #include <chrono>
 #include <cmath>
@@ -11,6 +11,7 @@
 #include "cloth_cmds.h"
 #include "progress_bar.h"
 #include "tbsp/cloth/animatable_model.h"
+#include "tbsp/cloth/collision_proxies.h"
 #include "tbsp/core/error.h"
 #include "tbsp/io/atomic_file.h"
 #include "tbsp/io/bvh_skeleton.h"
@@ -27,16 +28,15 @@ namespace {
 
 // ---- tbsp cloth build
 
-struct BuildArgs {
-  std::string mesh, bvh, segmentation, out, joints = "Thigh,Shin,UpLeg,Leg,Buttock,hip,abdomen,Hips,Spine";
+// The inputs `cloth build` and `cloth proxies` share: a template posed as a BVH frame, the clip,
+// the segmentation of the template's sequence and the bones that get proxies.
+struct ModelInputs {
+  std::string mesh, bvh, segmentation, joints = "Thigh,Shin,UpLeg,Leg,Buttock,hip,abdomen,Hips,Spine";
   int bvh_frame = 0;
   double scale = 0.01;
-  ClothMaterial material;
-  bool quiet = false;
 };
 
-void add_build(CLI::App& cloth, BuildArgs& a, CLI::App*& sub) {
-  sub = cloth.add_subcommand("build", "an animatable model: skeleton from a BVH, bone-heat weights, clothness, collision proxies (thesis §10.6)");
+void add_model_inputs(CLI::App* sub, ModelInputs& a) {
   sub->add_option("--template", a.mesh, "template mesh in the pose of the BVH frame --bvh-frame (e.g. frame 0 of the reference sequence)")
       ->required();
   sub->add_option("--bvh", a.bvh, "BVH clip whose skeleton drives the model")->required();
@@ -44,6 +44,18 @@ void add_build(CLI::App& cloth, BuildArgs& a, CLI::App*& sub) {
   sub->add_option("--scale", a.scale, "BVH units -> metres (default 0.01)")->check(CLI::PositiveNumber);
   sub->add_option("--segmentation", a.segmentation, "output of `tbsp cloth segment` for this template's sequence")->required();
   sub->add_option("--proxy-joints", a.joints, "comma-separated joint-name parts that get collision proxies (default: legs, hips, spine)");
+}
+
+struct BuildArgs {
+  ModelInputs in;
+  std::string out;
+  ClothMaterial material;
+  bool quiet = false;
+};
+
+void add_build(CLI::App& cloth, BuildArgs& a, CLI::App*& sub) {
+  sub = cloth.add_subcommand("build", "an animatable model: skeleton from a BVH, bone-heat weights, clothness, collision proxies (thesis §10.6)");
+  add_model_inputs(sub, a.in);
   sub->add_option("--d-n", a.material.d_n, "cloth material d_n (default 2; `tbsp cloth estimate` finds it from a recording)")->check(CLI::NonNegativeNumber);
   sub->add_option("--d-t", a.material.d_t, "cloth material d_t (default 4)")->check(CLI::NonNegativeNumber);
   sub->add_option("--k-bend", a.material.k_bend, "cloth material k_bend (default 0.3)")->check(CLI::Range(0.0, 1.0));
@@ -73,17 +85,29 @@ void read_segmentation(const std::string& path, Eigen::Index n, Eigen::VectorXd&
   }
 }
 
-int cmd_build(const BuildArgs& a) {
-  const TriMesh mesh = read_mesh(a.mesh);
-  const BvhMotion clip = read_bvh(a.bvh);
+struct LoadedInputs {
+  TriMesh mesh;
+  Skeleton skeleton;
   Eigen::VectorXd sigma, clothness;
-  read_segmentation(a.segmentation, mesh.V.rows(), sigma, clothness);
-  ProxyFitOptions po;
+  ProxyFitOptions proxies;
+};
+
+LoadedInputs load_model_inputs(const ModelInputs& a) {
+  LoadedInputs l;
+  l.mesh = read_mesh(a.mesh);
+  l.skeleton = skeleton_from_bvh(read_bvh(a.bvh), a.bvh_frame, a.scale);
+  read_segmentation(a.segmentation, l.mesh.V.rows(), l.sigma, l.clothness);
   std::stringstream ss(a.joints);
   for (std::string part; std::getline(ss, part, ',');)
-    if (!part.empty()) po.joints.push_back(part);
+    if (!part.empty()) l.proxies.joints.push_back(part);
+  return l;
+}
+
+int cmd_build(const BuildArgs& a) {
+  const LoadedInputs in = load_model_inputs(a.in);
+  const TriMesh& mesh = in.mesh;
   // 40 Hz; `cloth animate` steps by the clip's frame time
-  AnimatableModel m = synth::build_animatable_model(mesh, skeleton_from_bvh(clip, a.bvh_frame, a.scale), sigma, clothness, po, 1.0 / 40);
+  AnimatableModel m = synth::build_animatable_model(mesh, in.skeleton, in.sigma, in.clothness, in.proxies, 1.0 / 40);
   m.materials = {a.material};
   save_animatable_model(a.out, m);
   if (!a.quiet) {
@@ -91,6 +115,53 @@ int cmd_build(const BuildArgs& a) {
     for (Eigen::Index i = 0; i < m.clothness.size(); ++i) cloth += m.clothness(i) > 0;
     std::cout << "cloth build: " << mesh.V.rows() << " vertices (" << cloth << " simulated), " << m.skeleton.numJoints() << " joints, "
               << m.proxies.size() << " proxies -> " << a.out << "\n";
+  }
+  return 0;
+}
+
+// ---- tbsp cloth proxies
+
+struct ProxiesArgs {
+  ModelInputs in;
+  std::string out;
+  bool quiet = false;
+};
+
+void add_proxies(CLI::App& cloth, ProxiesArgs& a, CLI::App*& sub) {
+  sub = cloth.add_subcommand("proxies", "collision proxies alone: one capped cone per bone fitted inside the body (thesis §10.4)");
+  add_model_inputs(sub, a.in);
+  sub->add_option("--out", a.out, "proxies JSON (format tbsp-collision-proxies; the same entries as a model's \"proxies\")")->required();
+  sub->add_flag("-q,--quiet", a.quiet, "no table");
+}
+
+int cmd_proxies(const ProxiesArgs& a) {
+  const LoadedInputs in = load_model_inputs(a.in);
+  const std::vector<CollisionProxy> px = fit_collision_proxies(in.mesh.V, in.mesh.F, in.skeleton, in.sigma, in.clothness, in.proxies);
+  if (px.empty())
+    throw InvalidInput("cloth proxies: no bone of " + a.in.bvh + " matching --proxy-joints '" + a.in.joints +
+                       "' has enough body vertices of " + a.in.mesh + " nearest it; name other joints");
+  nlohmann::json list = nlohmann::json::array();
+  for (const CollisionProxy& p : px)
+    list.push_back({{"joint", p.bone.joint},
+                    {"name", in.skeleton.names[std::size_t(p.bone.joint)]},
+                    {"child", p.bone.child},
+                    {"a", {p.cone.a.x(), p.cone.a.y(), p.cone.a.z()}},
+                    {"b", {p.cone.b.x(), p.cone.b.y(), p.cone.b.z()}},
+                    {"ra", p.cone.ra},
+                    {"rb", p.cone.rb},
+                    {"vertices", p.vertices},
+                    {"penetration", p.penetration}});
+  const nlohmann::json j = {{"format", "tbsp-collision-proxies"}, {"version", 1}, {"template", a.in.mesh}, {"proxies", list}};
+  write_text_file_atomic(a.out, j.dump(1) + "\n");
+  if (!a.quiet) {
+    std::printf("%-28s %9s %9s %9s %8s %12s\n", "bone (joint -> child)", "length", "r start", "r end", "vertices", "max inside");
+    for (const CollisionProxy& p : px) {
+      const std::string bone = in.skeleton.names[std::size_t(p.bone.joint)] + " -> " + in.skeleton.names[std::size_t(p.bone.child)];
+      std::printf("%-28s %9.4f %9.4f %9.4f %8d %12.5f\n", bone.c_str(), (p.cone.b - p.cone.a).norm(), p.cone.ra, p.cone.rb, p.vertices,
+                  p.penetration);
+    }
+    std::cout << "(lengths and radii in the template's units; max inside: the deepest body vertex inside the cone's side)\n";
+    std::cout << "cloth proxies: " << px.size() << " proxies -> " << a.out << "\n";
   }
   return 0;
 }
@@ -192,11 +263,12 @@ int cmd_animate(const AnimateArgs& a) {
 
 void add_cloth_model_commands(CLI::App& cloth, CommandTable& table) {
   register_command<BuildArgs>(cloth, table, add_build, cmd_build);
+  register_command<ProxiesArgs>(cloth, table, add_proxies, cmd_proxies);
   register_command<AnimateArgs>(cloth, table, add_animate, cmd_animate);
 }
 
 void add_cloth_commands(CLI::App& app, CommandTable& table) {
-  CLI::App* cloth = app.add_subcommand("cloth", "cloth estimation (thesis ch. 10, docs/cloth.md): synth, segment, build, animate");
+  CLI::App* cloth = app.add_subcommand("cloth", "cloth estimation (thesis ch. 10, docs/cloth.md): synth, segment, proxies, build, animate, estimate");
   cloth->require_subcommand(1);
   add_cloth_segment_commands(*cloth, table);
   add_cloth_model_commands(*cloth, table);

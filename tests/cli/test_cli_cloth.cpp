@@ -1,4 +1,4 @@
-// `tbsp cloth synth|segment|build|animate` end to end on the CMU clips, and their bad inputs.
+// `tbsp cloth synth|segment|proxies|build|animate` end to end on the CMU clips, and their bad inputs.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -53,6 +53,24 @@ TEST(CliCloth, SynthSegmentBuildAnimate) {
   const tbsp::AnimatableModel model = tbsp::load_animatable_model((d / "model.json").string());
   EXPECT_EQ(model.mesh.V.rows(), Eigen::Index(seg["clothness"].size()));
   EXPECT_GE(model.proxies.size(), 4u);
+  // the proxies alone: the model's cones, each inside the body (at most 2 % of its radius)
+  const std::string inputs = "--template " + (d / "seq" / "mesh_0000.ply").string() + " --bvh " + clip("02_05.bvh") +
+                             " --segmentation " + (d / "seg.json").string();
+  r = run_cli("cloth proxies " + inputs + " --out " + (d / "proxies.json").string(), d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("max inside"), std::string::npos) << r.out;
+  const auto px = read_json(d / "proxies.json");
+  EXPECT_EQ(px["format"], "tbsp-collision-proxies");
+  ASSERT_EQ(px["proxies"].size(), model.proxies.size());
+  for (std::size_t k = 0; k < model.proxies.size(); ++k) {
+    EXPECT_NEAR(px["proxies"][k]["ra"].get<double>(), model.proxies[k].cone.ra, 1e-9);
+    EXPECT_NEAR(px["proxies"][k]["rb"].get<double>(), model.proxies[k].cone.rb, 1e-9);
+    EXPECT_GE(px["proxies"][k]["penetration"].get<double>(), 0.0);
+  }
+  r = run_cli("cloth proxies " + inputs + " --proxy-joints Tentacle --out " + (d / "none.json").string(), d);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("Tentacle"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d / "none.json"));
   // a new animation from another clip
   TBSP_REQUIRE_FILE(clip("01_01.bvh"));
   r = run_cli("cloth animate --model " + (d / "model.json").string() + " --bvh " + clip("01_01.bvh") + " --frames 0:297 --out " +
