@@ -120,12 +120,12 @@ int main(int argc, char** argv) {
   std::vector<double> articulated;  // --articulated DEG (repeatable): bunny head + ears turned by DEG
   std::string save_target;
   std::string save_fit;  // --save-fit PREFIX: the real-scan rows' fits as PREFIX_DEG[_coarse].ply, the articulated ones' as PREFIX_DEG.obj
-  bool hole_oracle = false;
-  std::string articulated_model = "bunny";
+  bool hole_oracle = false;  // --hole-oracle: with --articulated, the floor of rigidity-prior hole filling
+  std::string articulated_model = "bunny";  // --articulated-model bunny|armadillo|human
   int hole_axis = 1;  // --hole-axis N: the articulated rows' hole across principal axis N (ScenarioOptions::hole_axis)
-  bool markerless = false;  // --markerless: articulated rows roughly in place (8 deg, 3.7 %, x1.05), fitted without and with markers  // --articulated-model bunny|armadillo|human
+  bool markerless = false;  // --markerless: articulated rows roughly in place (8 deg, 3.7 %, x1.05), fitted without and with markers
   std::vector<double> real_tilts;  // --real-tilt DEG (repeatable; default 15)
-  int real_markers = 16;  // --hole-oracle: with --articulated, the floor of rigidity-prior hole filling
+  int real_markers = 16;  // --real-markers N: markers of the real-scan rows
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--no-poisson") poisson = false;
@@ -221,9 +221,9 @@ int main(int argc, char** argv) {
       if (!save_fit.empty()) write_mesh(save_fit + "_" + std::to_string(int(deg)) + (params.coarse_nodes > 0 && base.coarse_nodes == 0 ? "_coarse" : "") + ".ply", fit);
     }
   }
-  // 2a. articulated ground truth (fitting v2 issue): the bunny's head and ears turned by DEG
-  // about their joints (smooth falloff), x1.1, sigma 0.2 % noise, no outliers, 25 % hole,
-  // farthest-point markers
+  // 2a. articulated ground truth (fitting v2 issue): the model's head / ears / limbs turned by DEG
+  // about their joints (smooth falloff; synth::bunny_head_and_ears, armadillo_limbs, human_limbs),
+  // x1.1, sigma 0.2 % noise, no outliers, 25 % hole, farthest-point markers
   struct Articulated { const char* name; const char* path; int points; std::vector<synth::Joint> (*joints)(double); };
   const Articulated arts[] = {{"bunny articulated: head+ears", "/meshes/libigl__libigl-tutorial-data/bunny.off", 30000, &synth::bunny_head_and_ears},
                               {"armadillo articulated: forearms+knee", "/meshes/libigl__libigl-tutorial-data/armadillo.obj", 100000, &synth::armadillo_limbs},
