@@ -1,5 +1,6 @@
-// `tbsp cloth proxies` (collision proxies alone, thesis §10.4), `tbsp cloth build` (skeleton + bone-heat weights + proxies + clothness -> an AnimatableModel,
-// thesis §10.1/§10.4/§10.6) and `tbsp cloth animate` (a model driven by a BVH clip -> meshes).
+// `tbsp cloth proxies` (collision proxies alone, thesis §10.4), `tbsp cloth build` (skeleton +
+// bone-heat weights + proxies + clothness -> an AnimatableModel, thesis §10.1/§10.4/§10.6) and
+// `tbsp cloth animate` (a model driven by a BVH clip -> meshes).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
