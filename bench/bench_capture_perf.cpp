@@ -21,11 +21,16 @@
 //    to 40-47 % of its volume where it turns by ~180 degrees (the table reports the smallest volume).
 // 5. --stereo FRAMES: model-guided stereo after the silhouette refinement (stereo_refine) on the
 //    performer with 1 cm folds (detail 2): the same sequence without and with it.
+// 6. --hull FRAMES: a template placed by eye (turned about the vertical, scaled, moved) tracked
+//    as placed and after the registration to the first frame's visual hull (register_to_hull):
+//    the synthetic performer over FRAMES frames, the Vlasic samba and crane (frame 0000) on their
+//    first frame; error and IoU against the truth.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -38,6 +43,7 @@
 #include "tbsp/io/mocap_io.h"
 #include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/mesh/remeshing.h"
+#include "tbsp/mesh/similarity_icp.h"
 #include "tbsp/mesh/tetrahedralize.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/multiview/marker_animation.h"
@@ -211,6 +217,75 @@ void vlasic_rows(int steps, int size, bool follow_turn, int keyframes, double ke
   }
 }
 
+
+// A template placed by eye: turned by `deg` about the vertical (y) through its centroid, scaled by
+// `scale`, moved by `shift` × its diagonal.
+TriMesh misplace(const TriMesh& m, double deg, double scale, double shift) {
+  const Eigen::Vector3d c = m.V.colwise().mean().transpose();
+  const double diag = (m.V.colwise().maxCoeff() - m.V.colwise().minCoeff()).norm();
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  T.topLeftCorner<3, 3>() = scale * Eigen::AngleAxisd(deg * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  T.topRightCorner<3, 1>() = c - T.topLeftCorner<3, 3>() * c + shift * diag * Eigen::Vector3d(1, 0.3, -0.6).normalized();
+  TriMesh out = m;
+  out.V = transform_points(T, m.V);
+  return out;
+}
+
+void hull_rows(int frames, int size) {
+  std::printf("\n## First frame: a template placed by eye, as placed and registered to the visual hull (8 views of %dx%d)\n\n", size, size);
+  std::printf("| performer | frames | offset (turn, scale, shift %% diag) | as placed: worst error (%% diag) / worst view IoU | registered: worst error / worst view IoU | "
+              "registration: rotation, scale, IoU before -> after, s |\n|---|---|---|---|---|---|\n");
+  struct Offset {
+    double deg, scale, shift;
+  };
+  const Offset offsets[] = {{0, 1, 0}, {10, 1.05, 0.03}, {15, 1.08, 0.05}, {25, 1.15, 0.08}, {35, 1.2, 0.1}};
+  auto run = [&](const std::string& name, const Studio& st, const TriMesh& templ, double diag, int nframes,
+                 const std::function<TriMesh(int)>& truth) {
+    for (const Offset& off : offsets) {
+      const TriMesh rough = misplace(templ, off.deg, off.scale, off.shift);
+      double worst[2] = {0, 0}, iou[2] = {1, 1};
+      HullRegistration reg;
+      for (int mode = 0; mode < 2; ++mode) {
+        PerformanceCapture pc;
+        PerformanceCaptureOptions po;
+        po.register_to_hull = mode == 1;
+        pc.setOptions(po);
+        pc.setCameras(st.cameraList());
+        pc.setTemplate(rough);
+        StudioFrameStream stream(st, {});
+        StudioFrame fr;
+        for (int f = 0; f < nframes && stream.next(fr); ++f) {
+          TriMesh m;
+          pc.track(fr.images, fr.silhouettes, fr.frame, m);
+          worst[mode] = std::max(worst[mode], (m.V - truth(fr.frame).V).rowwise().norm().mean() / diag);
+          iou[mode] = std::min(iou[mode], pc.report().frames.back().iou_min);
+        }
+        if (mode == 1) reg = pc.report().hull;
+      }
+      std::printf("| %s | %d | %.0f deg, x%.2f, %.0f %% | %.3f / %.4f | %.3f / %.4f | %.1f deg, x%.3f, %.3f -> %.3f, %.2f s |\n", name.c_str(), nframes,
+                  off.deg, off.scale, 100 * off.shift, 100 * worst[0], iou[0], 100 * worst[1], iou[1], reg.icp.rotation_deg, reg.icp.scale,
+                  reg.iou_before, reg.iou_after, reg.seconds);
+      std::fflush(stdout);
+    }
+  };
+  {
+    const SynthSequence seq = synth_sequence("/tmp/tbsp_bench_hull_synth", frames, size, 1);
+    run("synthetic performer", seq.studio, seq.rest, seq.diag, frames, [&](int f) { return read_mesh(seq.studio.groundTruthPath(f)); });
+  }
+  const std::string base = std::string(TBSP_SHARED_DATA_DIR) + "/meshes/CraGL__Hyperspectral-Inverse-Skinning/models/";
+  for (const char* name : {"samba", "crane"}) {
+    const TriMesh key = read_mesh(base + name + "/mesh_0000.obj");
+    const std::string dir = std::string("/tmp/tbsp_bench_hull_") + name;
+    synth::StudioOptions so;
+    so.frames = 1;
+    so.width = so.height = size;
+    synth::write_sequence_studio(dir, key, [&](int) { return key; }, so);
+    const Studio st = read_studio(dir + "/studio.yaml");
+    const double diag = (key.V.colwise().maxCoeff() - key.V.colwise().minCoeff()).norm();
+    run(std::string("Vlasic ") + name + " 0000", st, key, diag, 1, [&](int) { return key; });
+  }
+}
+
 // Model-guided stereo after the refinement (PerformanceCapture::stereo_refine) on a performer
 // with 1 cm folds (synth-studio --detail 2 --folds 0.01): the same sequence without and with it.
 void stereo_rows(int frames, int size) {
@@ -250,7 +325,7 @@ void stereo_rows(int frames, int size) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0, stereo = 0;
+  int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0, stereo = 0, hull = 0;
   bool capture_only = false, vlasic_turn = false;
   int keyframes = 0;
   double keyframe_iou = 0.98;
@@ -262,17 +337,19 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--vlasic") && i + 1 < argc) vlasic = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--stereo") && i + 1 < argc) stereo = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--vlasic-turn")) vlasic_turn = true;
+    else if (!std::strcmp(argv[i], "--hull") && i + 1 < argc) hull = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--keyframes") && i + 1 < argc) keyframes = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--keyframe-iou") && i + 1 < argc) keyframe_iou = std::atof(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only] [--vlasic STEPS [--vlasic-turn] [--keyframes N [--keyframe-iou X]]] [--stereo FRAMES]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only] [--vlasic STEPS [--vlasic-turn] [--keyframes N [--keyframe-iou X]]] [--stereo FRAMES] [--hull FRAMES]\n");
       return 2;
     }
   }
-  if (capture_only || vlasic > 0 || stereo > 0) {
+  if (capture_only || vlasic > 0 || stereo > 0 || hull > 0) {
     if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {1});
     if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_turn, keyframes, keyframe_iou);
     if (stereo > 0) stereo_rows(stereo, capture_size);
+    if (hull > 0) hull_rows(hull, capture_size);
     return 0;
   }
   const std::string shared = TBSP_SHARED_DATA_DIR;

@@ -8,6 +8,9 @@
 #include <nlohmann/json.hpp>
 
 #include <opencv2/imgproc.hpp>
+#include <pcl/PCLPointCloud2.h>
+#include <pcl/conversions.h>
+#include <pcl/point_types.h>
 
 #include "command.h"
 #include "progress_bar.h"
@@ -15,11 +18,13 @@
 #include "tbsp/core/error.h"
 #include "tbsp/core/timer.h"
 #include "tbsp/io/atomic_file.h"
+#include "tbsp/io/cloud_io.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/mesh/trajectory_smoother.h"
 #include "tbsp/multiview/performance_capture.h"
 #include "tbsp/multiview/rasterizer.h"
+#include "tbsp/multiview/visual_hull.h"
 
 namespace fs = std::filesystem;
 
@@ -32,7 +37,7 @@ struct CaptureArgs {
   PerformanceCaptureOptions o;
   int every = 1, overlays = 4;
   double smooth = 0;
-  bool no_features = false, no_meshes = false, quiet = false;
+  bool no_features = false, no_meshes = false, quiet = false, no_hull = false;
 };
 
 void add_capture(CLI::App& app, CaptureArgs& a, CLI::App*& sub) {
@@ -51,6 +56,11 @@ void add_capture(CLI::App& app, CaptureArgs& a, CLI::App*& sub) {
   sub->add_flag("--stereo", a.o.stereo_refine, "model-guided stereo after the silhouette refinement (§6.3.3: folds, concavities; ~1-2 s per frame)");
   sub->add_option("--stereo-range", a.o.stereo_search_range, "its search along each ray, +- world units (default 1 % of the template's diagonal)")
       ->check(CLI::NonNegativeNumber);
+  sub->add_flag("--no-register-hull", a.no_hull,
+                "take the template as posed (default: first register it to the first frame's visual hull by a similarity, applied "
+                "when it raises the silhouette overlap: a template placed only roughly, within ~25 deg and ~15 % of size, starts in place)");
+  sub->add_option("--hull-resolution", a.o.hull_resolution, "voxels along the longest side of the visual hull's box (default 128)")
+      ->check(CLI::Range(16, 1024));
   sub->add_option("--failure-iou", a.o.failure_iou, "a frame whose worst view IoU is below this is reported as a tracking failure (default 0.85)");
   sub->add_option("--overlays", a.overlays, "frames with a PNG overlay of the mesh on the camera images (default 4; 0 = none)")
       ->check(CLI::NonNegativeNumber);
@@ -94,6 +104,7 @@ int cmd_capture(const CaptureArgs& a) {
   make_out_dir(a.out);
   PerformanceCaptureOptions o = a.o;
   o.features = !a.no_features;
+  o.register_to_hull = !a.no_hull;
   PerformanceCapture pc;
   pc.setOptions(o);
   const std::vector<Camera> cams = st.cameraList();
@@ -129,6 +140,21 @@ int cmd_capture(const CaptureArgs& a) {
                           {"seconds_setup", r.t_setup},
                           {"seconds", seconds_since(t0)},
                           {"per_frame", frames}};
+    if (r.hull_tried) {
+      const HullRegistration& h = r.hull;
+      rep["hull_registration"] = {{"applied", r.hull_registered},
+                                  {"message", r.hull_message},
+                                  {"rotation_deg", h.icp.rotation_deg},
+                                  {"scale", h.icp.scale},
+                                  {"translation", {h.icp.translation.x(), h.icp.translation.y(), h.icp.translation.z()}},
+                                  {"icp_iterations", h.icp.iterations},
+                                  {"icp_rms", h.icp.rms},
+                                  {"mean_iou_before", h.iou_before},
+                                  {"mean_iou_after", h.iou_after},
+                                  {"hull_samples", h.hull_points},
+                                  {"voxel", h.voxel},
+                                  {"seconds", h.seconds}};
+    }
     if (!error.empty()) rep["error"] = error;
     write_text_file_atomic((fs::path(a.out) / "capture_report.json").string(), rep.dump(1) + "\n");
   };
@@ -167,6 +193,10 @@ int cmd_capture(const CaptureArgs& a) {
   write_report("");
   const auto& r = pc.report();
   if (!a.quiet) {
+    if (r.hull_tried && !r.hull_registered) std::cout << "visual hull: " << r.hull_message << "\n";
+    if (r.hull_registered)
+      std::cout << "visual hull: template turned by " << r.hull.icp.rotation_deg << " deg, scaled by " << r.hull.icp.scale << ", mean view IoU "
+                << r.hull.iou_before << " -> " << r.hull.iou_after << "\n";
     double worst = 1;
     for (const auto& f : r.frames) worst = std::min(worst, f.iou_min);
     std::cout << "capture: " << done << " frames, worst view IoU " << worst << ", " << r.failed_frames << " tracking failure(s), "
@@ -175,8 +205,65 @@ int cmd_capture(const CaptureArgs& a) {
   return 0;
 }
 
+struct HullArgs {
+  std::string studio, out, frame, tmpl, registered;
+  VisualHullOptions o;
+  bool quiet = false;
+};
+
+void add_visual_hull(CLI::App& app, HullArgs& a, CLI::App*& sub) {
+  sub = app.add_subcommand("visual-hull",
+                           "carve the visual hull of one studio frame's silhouettes; optionally register a template to it (docs/performance_capture.md)");
+  sub->add_option("studio", a.studio, "studio.yaml (or its folder) with silhouettes for every camera")->required();
+  sub->add_option("--out", a.out, "hull surface samples with outward normals: a .ply or .pcd point cloud")->required();
+  sub->add_option("--frame", a.frame, "the studio frame (default: the first)");
+  sub->add_option("--resolution", a.o.resolution, "voxels along the longest side of the hull's box (default 128)")->check(CLI::Range(16, 1024));
+  sub->add_option("--margin", a.o.margin_px, "dilate the silhouettes by this many pixels first (calibration error; default 0)")->check(CLI::Range(0, 50));
+  auto* t = sub->add_option("--template", a.tmpl, "a template placed roughly like the performer: register it to the hull (similarity ICP)");
+  sub->add_option("--registered", a.registered, "where to write the registered template (mesh file)")->needs(t);
+  sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
+}
+
+int cmd_visual_hull(const HullArgs& a) {
+  const Studio st = read_studio(a.studio);
+  const auto [first, last] = parse_frames(a.frame, st);
+  if (first != last) throw InvalidInput("--frame takes one frame (not " + a.frame + ")");
+  for (const auto& c : st.cameras)
+    if (c.silhouettes.empty()) throw InvalidInput("camera '" + c.camera.name() + "' of " + a.studio + " has no silhouettes: the visual hull needs them for every camera");
+  if (!a.tmpl.empty() && a.registered.empty()) throw InvalidInput("--template needs --registered OUT: where to write the registered template");
+  const TriMesh tmpl = a.tmpl.empty() ? TriMesh{} : read_mesh(a.tmpl);
+  const std::vector<Camera> cams = st.cameraList();
+  for_each_frame(st, first, last, true, a.quiet, [&](const StudioFrame& fr, const ProgressCallback&, ProgressBar&) {
+    const auto t0 = Clock::now();
+    const VisualHull h = compute_visual_hull(cams, fr.silhouettes, a.o);
+    pcl::PointCloud<pcl::PointNormal> cloud;
+    for (Eigen::Index i = 0; i < h.points.rows(); ++i) {
+      pcl::PointNormal p;
+      p.getVector3fMap() = h.points.row(i).transpose().cast<float>();
+      p.getNormalVector3fMap() = h.normals.row(i).transpose().cast<float>();
+      cloud.push_back(p);
+    }
+    pcl::PCLPointCloud2 b;
+    pcl::toPCLPointCloud2(cloud, b);
+    write_cloud(a.out, b, true);
+    std::cout << "visual hull of frame " << fr.frame << ": " << h.points.rows() << " surface samples, voxel " << h.voxel << ", volume " << h.volume()
+              << ", " << seconds_since(t0) << " s -> " << a.out << "\n";
+    if (!tmpl.V.size()) return;
+    const HullRegistration r = register_to_visual_hull(tmpl, cams, fr.silhouettes, a.o);
+    TriMesh m = tmpl;
+    m.V = transform_points(r.icp.transform, tmpl.V);
+    write_mesh(a.registered, m);
+    std::cout << "registered template: turned by " << r.icp.rotation_deg << " deg, scaled by " << r.icp.scale << ", moved by "
+              << r.icp.translation.norm() << "; mean view IoU " << r.iou_before << " -> " << r.iou_after << " -> " << a.registered << "\n";
+  });
+  return 0;
+}
+
 }  // namespace
 
-void add_perf_capture_commands(CLI::App& app, CommandTable& table) { register_command<CaptureArgs>(app, table, add_capture, cmd_capture); }
+void add_perf_capture_commands(CLI::App& app, CommandTable& table) {
+  register_command<CaptureArgs>(app, table, add_capture, cmd_capture);
+  register_command<HullArgs>(app, table, add_visual_hull, cmd_visual_hull);
+}
 
 }  // namespace tbsp::cli

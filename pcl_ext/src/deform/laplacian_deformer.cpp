@@ -303,6 +303,9 @@ Eigen::Vector3d LaplacianDeformer::evaluate(const SurfacePoint& p, const Eigen::
 }
 
 void LaplacianDeformer::checkRank() const {
+  // With an anchor every component is pinned (weakly) to its rest position: directions the
+  // constraints leave free keep their rest values instead of making the system singular.
+  if (anchor_ > 0) return;
   const Cache& c = *cache_;
   std::vector<Eigen::Matrix3d> S(std::size_t(c.num_components), Eigen::Matrix3d::Zero());
   std::vector<char> has_face(std::size_t(c.num_components), 0);

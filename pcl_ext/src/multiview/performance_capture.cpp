@@ -6,6 +6,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "tbsp/core/error.h"
+#include "tbsp/core/logging.h"
 #include "tbsp/core/timer.h"
 #include "tbsp/deform/deformation_transfer.h"
 #include "tbsp/deform/tet_deformer.h"
@@ -51,6 +52,7 @@ bool PerformanceCaptureOptions::isValid(std::string* why) const {
   if (refine_iterations < 0 || refine_iterations > 100) return fail("refine_iterations must be in 0..100");
   if (!(failure_iou >= 0) || !(failure_iou < 1)) return fail("failure_iou must be in [0, 1)");
   if (!features && !silhouettes) return fail("features and silhouettes are both off: nothing would drive the template");
+  if (hull_resolution < 16 || hull_resolution > 1024) return fail("hull_resolution must be in 16..1024");
   return true;
 }
 
@@ -106,12 +108,19 @@ TetMesh PerformanceCapture::controlMesh() const {
   return t;
 }
 
-void PerformanceCapture::start() {
+void PerformanceCapture::start(const Eigen::Matrix4d* registration) {
   const std::string who = "[tbsp::PerformanceCapture] ";
   const auto t0 = Clock::now();
   if (cameras_.empty()) throw InvalidInput(who + "no cameras: call setCameras with the calibrated views");
   if (template_.V.rows() < 4 || template_.F.rows() < 4) throw InvalidInput(who + "the template is empty: set a closed surface mesh");
   if (!template_.V.allFinite()) throw InvalidInput(who + "the template has non-finite vertices");
+  // the template (and given tets) the tracking starts from: as given, or registered to the hull
+  TriMesh templ = template_;
+  TetMesh given_tets = template_tets_;
+  if (registration) {
+    templ.V = transform_points(*registration, templ.V);
+    if (tets_given_) given_tets.V = transform_points(*registration, given_tets.V);
+  }
   impl_.reset(new Impl);
   Impl& I = *impl_;
   report_ = PerformanceCaptureReport{};
@@ -120,20 +129,20 @@ void PerformanceCapture::start() {
   // open, or parts modelled as overlapping closed bodies) the decimated surface itself (the
   // shell's apexes are inside and not part of it).
   if (tets_given_) {
-    require_valid_tet_mesh(template_tets_, who);
-    I.tets = template_tets_;
+    require_valid_tet_mesh(given_tets, who);
+    I.tets = given_tets;
     I.surf_faces = tet_boundary_faces(I.tets.T);
   } else {
     try {
       try {
-        I.tets = tetrahedralize_to_size(template_, options_.tets);
+        I.tets = tetrahedralize_to_size(templ, options_.tets);
       } catch (const Error&) {
-        I.tets = tetrahedralize_components(template_, options_.tets);  // overlapping closed parts
+        I.tets = tetrahedralize_components(templ, options_.tets);  // overlapping closed parts
         report_.per_component_tets = true;
       }
       I.surf_faces = tet_boundary_faces(I.tets.T);
     } catch (const Error&) {
-      const TriMesh dec = options_.tets > 0 && options_.tets < template_.F.rows() ? decimate_mesh(template_, options_.tets) : template_;
+      const TriMesh dec = options_.tets > 0 && options_.tets < templ.F.rows() ? decimate_mesh(templ, options_.tets) : templ;
       I.tets = surface_to_tets(dec);  // one tetrahedron per triangle (§10.8)
       I.surf_faces = dec.F;
       report_.shell_tets = true;
@@ -161,7 +170,7 @@ void PerformanceCapture::start() {
   DeformationTransferOptions to;
   to.radius = options_.transfer_radius;
   I.transfer.setOptions(to);
-  I.transfer.precompute(I.tets, template_.V);
+  I.transfer.precompute(I.tets, templ.V);
   // How each template vertex moves per unit move of each handle (rotations fixed): the
   // deformer's linear response carried through the transfer, B · ∂X/∂h. Exact for the linear
   // solve of the next deformer iteration, so constraints on template points fit the handles.
@@ -169,13 +178,13 @@ void PerformanceCapture::start() {
     std::vector<int> all(std::size_t(I.tets.V.rows()));
     for (std::size_t v = 0; v < all.size(); ++v) all[v] = int(v);
     I.response = I.transfer.matrix() * I.D.handleResponse(all);  // factorizes
-    I.stiffness = detail::handle_stiffness(I.response, unique_edges(template_.F));
+    I.stiffness = detail::handle_stiffness(I.response, unique_edges(templ.F));
   }
   I.X = I.tets.V;
-  I.mesh = template_;
+  I.mesh = templ;
   report_.tet_vertices = I.tets.V.rows();
   report_.tets = I.tets.T.rows();
-  report_.surface_vertices = template_.V.rows();
+  report_.surface_vertices = templ.V.rows();
   report_.control_surface_vertices = Eigen::Index(I.surf_vertex.size());
   report_.handles = int(I.handle_vertex.size());
   report_.t_setup = seconds_since(t0);
@@ -211,7 +220,34 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
                            std::to_string(cameras_[k].width()) + "x" + std::to_string(cameras_[k].height()) + " (the calibrated size)");
     }
   }
-  if (!started_) start();
+  if (!started_) {
+    if (options_.register_to_hull) {
+      report_progress(progress_, 0.0, "visual hull");
+      VisualHullOptions ho;
+      ho.resolution = options_.hull_resolution;
+      HullRegistration reg;
+      std::string message;
+      try {
+        reg = register_to_visual_hull(template_, cameras_, silhouettes, ho);
+        if (!(reg.iou_before > 0))  // a template nowhere near the performer is an error below, not a start for ICP
+          message = "the template covers no silhouette pixel: it was not registered";
+        else if (!(reg.iou_after > reg.iou_before))
+          message = "the registration did not raise the mean silhouette IoU (" + std::to_string(reg.iou_before) + " -> " +
+                    std::to_string(reg.iou_after) + "): the template was used as given";
+      } catch (const InvalidInput& e) {
+        message = std::string("no visual hull: ") + e.what() + "; the template was used as given";
+      }
+      const bool apply = message.empty();
+      if (!apply) logger()->info("{}{}", where, message);
+      start(apply ? &reg.icp.transform : nullptr);
+      report_.hull_tried = true;
+      report_.hull_registered = apply;
+      report_.hull_message = message;
+      report_.hull = reg;
+    } else {
+      start();
+    }
+  }
   Impl& I = *impl_;
   const PerformanceCaptureOptions& o = options_;
   const bool first = I.frames == 0;

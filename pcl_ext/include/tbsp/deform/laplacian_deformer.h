@@ -199,7 +199,9 @@ public:
 
   /// \brief Adds ε·median(diag)·‖x − V_rest‖² to the energy (default ε = 0: off). A tiny ε
   /// (1e-9) keeps the system positive definite on folded/degenerate meshes whose Laplacian has
-  /// extra near-null vectors, at the cost of a small bias towards the rest positions.
+  /// extra near-null vectors, at the cost of a small bias towards the rest positions. With ε > 0
+  /// a component the constraints leave free to translate keeps its rest position along the free
+  /// directions (no "free to translate" error).
   void setAnchor(double epsilon);
 
   /// \brief Sliver guard of the cotangent Laplacian (laplacian(): vertex areas floored at

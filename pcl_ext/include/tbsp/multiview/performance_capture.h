@@ -31,6 +31,8 @@
 ///    and the handle distance as penalties.
 /// 5. **transfer** to the full-resolution template (DeformationTransfer, §7.3), then
 ///    **SilhouetteRefinement** (§6.3) for detail the tetrahedral model cannot carry.
+/// The first frame registers the given pose to the silhouettes (rims, 2 × pose_rounds); with
+/// `register_to_hull` a similarity to the first frame's visual hull comes before it.
 /// Tracking failures (smallest per-view silhouette IoU below `failure_iou`) are reported per
 /// frame; a failed frame gets a second, silhouette-only pose pass, and the tracker goes on.
 ///
@@ -50,6 +52,7 @@
 #include "tbsp/mesh/tet_mesh.h"
 #include "tbsp/mesh/tri_mesh.h"
 #include "tbsp/multiview/camera.h"
+#include "tbsp/multiview/visual_hull.h"
 
 namespace tbsp {
 
@@ -102,6 +105,16 @@ struct PerformanceCaptureOptions {
   bool stereo_refine = false;
   double stereo_search_range = 0;  ///< its ± search along each ray, world units, >= 0; 0 = 1 % of the template's bounding-box diagonal
   double failure_iou = 0.85;       ///< a frame whose smallest view IoU is below this is a tracking failure, [0, 1)
+  // first frame
+  /// Register the template to the first frame's visual hull first (register_to_visual_hull:
+  /// symmetric trimmed point-to-plane ICP with scale), so that a template placed only roughly
+  /// (within ~25° and ~15 % of size) starts in place. The similarity is applied only when it
+  /// raises the mean silhouette IoU of the template (a template already in place is left as
+  /// given) and the template overlaps the silhouettes at all (one outside every view stays an
+  /// error); a hull that cannot be carved (a camera that does not see the whole performer) is
+  /// reported and the given pose used. Off: the template is taken as posed.
+  bool register_to_hull = true;
+  int hull_resolution = 128;       ///< voxels along the longest side of the hull's box, 16..1024
 
   bool isValid(std::string* why = nullptr) const;
 };
@@ -127,6 +140,10 @@ struct CaptureFrameReport {
 };
 
 struct PerformanceCaptureReport {
+  bool hull_tried = false;           ///< register_to_hull ran; `hull` holds its result
+  bool hull_registered = false;      ///< ... and its similarity was applied to the template
+  std::string hull_message;          ///< why it was not applied (IoU not raised, or the hull's error)
+  HullRegistration hull;             ///< the similarity, IoU before/after, time
   Eigen::Index tet_vertices = 0, tets = 0, surface_vertices = 0, control_surface_vertices = 0;
   int handles = 0;
   bool per_component_tets = false;   ///< TetGen refused the whole template; each connected part was tetrahedralized on its own
@@ -161,7 +178,8 @@ public:
 
   /// Tracks one frame: `images` CV_8UC3 (BGR) or CV_8U per camera, `silhouettes` CV_8U (>= 128
   /// foreground), both of the calibrated size. The first call registers the template to this
-  /// frame (silhouettes only); later calls track from the previous one. Frames are consecutive
+  /// frame (silhouettes only; first to its visual hull with `register_to_hull`); later calls
+  /// track from the previous one. Frames are consecutive
   /// in time (`frame` is only a label for reports and errors). `out` gets the mesh (template
   /// connectivity); untouched on error.
   void track(const std::vector<cv::Mat>& images, const std::vector<cv::Mat>& silhouettes, int frame, TriMesh& out);
@@ -172,7 +190,7 @@ public:
 
 private:
   struct Impl;
-  void start();
+  void start(const Eigen::Matrix4d* registration = nullptr);
   PerformanceCaptureOptions options_;
   ProgressCallback progress_;
   std::vector<Camera> cameras_;
