@@ -136,6 +136,9 @@ TEST(SimilarityIcp, BadInputIsAClearError) {
   o.max_iterations = 0;
   EXPECT_THROW(similarity_icp(S, S, o), InvalidInput);
   o = {};
+  o.stall_iterations = -1;
+  EXPECT_THROW(similarity_icp(S, S, o), InvalidInput);
+  o = {};
   o.tolerance = -1;
   EXPECT_THROW(similarity_icp(S, S, o), InvalidInput);
   const Eigen::MatrixX3d few_normals = S.topRows(5);

@@ -34,6 +34,7 @@ void align_without_markers(FitState& s, TriMesh& aligned) {
   io.max_iterations = 60;
   io.tolerance = 1e-6 * s.diag;
   io.max_points = 20000;
+  io.stall_iterations = 0;  // as measured in docs/fitting.md
   const SimilarityIcpResult r = similarity_icp(rest.V, cloud, io);
   const Eigen::Matrix4d T = r.transform;
   const int it = r.iterations;

@@ -21,6 +21,7 @@ bool SimilarityIcpOptions::isValid(const char** why) const {
   if (max_iterations < 1 || max_iterations > 10000) return fail("max_iterations must be in 1..10000");
   if (!(tolerance >= 0) || !std::isfinite(tolerance)) return fail("tolerance must be >= 0 and finite");
   if (max_points < 10) return fail("max_points must be >= 10");
+  if (stall_iterations < 0 || stall_iterations > 1000) return fail("stall_iterations must be in 0..1000");
   return true;
 }
 
@@ -117,7 +118,9 @@ SimilarityIcpResult similarity_icp(const Eigen::MatrixX3d& source, const Eigen::
   std::vector<double> dt(mt), ds(ms);
   std::vector<char> okt(mt), oks(ms);
   std::vector<std::size_t> use_t, use_s;
-  int it = 0;
+  int it = 0, since_best = 0;
+  double best_rms = std::numeric_limits<double>::infinity();
+  Eigen::Matrix4d best_T = T;
   for (; it < o.max_iterations; ++it) {
     const Eigen::Matrix3d A = T.topLeftCorner<3, 3>().inverse();
     const Eigen::Vector3d t = T.topRightCorner<3, 1>();
@@ -159,6 +162,20 @@ SimilarityIcpResult similarity_icp(const Eigen::MatrixX3d& source, const Eigen::
       sq += ds[k] * ds[k];
     }
     r.rms = std::sqrt(sq / double(nuse));
+    if (o.stall_iterations > 0) {
+      if (r.rms < best_rms * (1 - 1e-4)) {
+        best_rms = r.rms;
+        best_T = T;
+        since_best = 0;
+      } else if (++since_best >= o.stall_iterations) {
+        r.converged = r.stalled = true;
+        if (r.rms > best_rms) {  // return the best transform seen, not the last of the cycle
+          T = best_T;
+          r.rms = best_rms;
+        }
+        break;
+      }
+    }
     const Eigen::Matrix4d step =
         target_normals ? point_to_plane_step(src, dst, nrm, o.estimate_scale) : Eigen::Matrix4d(Eigen::umeyama(src, dst, o.estimate_scale));
     if (!step.allFinite()) break;

@@ -36,6 +36,10 @@ struct SimilarityIcpOptions {
   /// the target's bounding-box diagonal. >= 0.
   double tolerance = 0;
   int max_points = 20000;      ///< at most this many points of each set are used (a fixed stride), >= 10
+  /// Stop when the RMS of the kept pairs has not fallen by more than 1e-4 (relative) for this
+  /// many iterations: trimming can make the pair set flip between two states near the optimum
+  /// (real silhouettes), and the transform then never settles. 0 = off; 0..1000.
+  int stall_iterations = 10;
   bool symmetric = false;      ///< also pair source points with their nearest target points
 
   bool isValid(const char** why = nullptr) const;
@@ -48,7 +52,8 @@ struct SimilarityIcpResult {
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();  ///< t
   double rms = 0;                ///< RMS distance of the kept pairs at the last iteration, world units
   int iterations = 0;
-  bool converged = false;        ///< stopped by `tolerance` before max_iterations
+  bool converged = false;        ///< stopped by `tolerance` or by a stalled RMS before max_iterations
+  bool stalled = false;          ///< ... by a stalled RMS
 };
 
 /// \brief Aligns `source` to `target` by trimmed ICP with scale, starting from the identity.
