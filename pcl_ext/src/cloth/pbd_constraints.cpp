@@ -137,26 +137,38 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
     for (std::size_t i = 0; i < n; ++i) entries[std::size_t(fill[hash(cells[i])]++)] = int(i);
   }
   const double exclude = 2 * s;  // rest neighbours closer than this are not contacts
-  for (std::size_t i = 0; i < n; ++i) {
-    const double reach = s + 2 * travel[i];
-    const int range = std::max(1, int(std::ceil(reach / cell)));
-    const Eigen::Vector3i& c = cells[i];
-    for (int dx = -range; dx <= range; ++dx)
-      for (int dy = -range; dy <= range; ++dy)
-        for (int dz = -range; dz <= range; ++dz) {
-          const Eigen::Vector3i cc = c + Eigen::Vector3i(dx, dy, dz);
-          const std::size_t h = hash(cc);
-          for (int q = start[h]; q < start[h + 1]; ++q) {
-            const std::size_t j = std::size_t(entries[std::size_t(q)]);
-            if (j == i || cells[j] != cc) continue;
-            if (travel[j] > travel[i] || (travel[j] == travel[i] && j > i)) continue;  // found from j
-            if (inv_mass_[i] == 0 && inv_mass_[j] == 0) continue;
-            if ((pos_[i] - pos_[j]).squaredNorm() > reach * reach) continue;
-            if ((rest_.row(Eigen::Index(i)) - rest_.row(Eigen::Index(j))).squaredNorm() < exclude * exclude) continue;
-            self_pairs_.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
+  // Parallel over fixed blocks of vertices, each block's pairs in its own list; the lists are
+  // joined in block order and sorted, so the pairs (and the order projectSelf visits them in)
+  // do not depend on the thread count.
+  constexpr std::size_t kBlock = 256;
+  const std::size_t nblocks = (n + kBlock - 1) / kBlock;
+  std::vector<std::vector<std::pair<int, int>>> found(nblocks);
+#pragma omp parallel for schedule(dynamic, 1) if (n >= kParallelMin)
+  for (std::size_t b = 0; b < nblocks; ++b) {
+    auto& out = found[b];
+    for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
+      const double reach = s + 2 * travel[i];
+      const int range = std::max(1, int(std::ceil(reach / cell)));
+      const Eigen::Vector3i& c = cells[i];
+      for (int dx = -range; dx <= range; ++dx)
+        for (int dy = -range; dy <= range; ++dy)
+          for (int dz = -range; dz <= range; ++dz) {
+            const Eigen::Vector3i cc = c + Eigen::Vector3i(dx, dy, dz);
+            const std::size_t h = hash(cc);
+            for (int q = start[h]; q < start[h + 1]; ++q) {
+              const std::size_t j = std::size_t(entries[std::size_t(q)]);
+              if (j == i || cells[j] != cc) continue;
+              if (travel[j] > travel[i] || (travel[j] == travel[i] && j > i)) continue;  // found from j
+              if (inv_mass_[i] == 0 && inv_mass_[j] == 0) continue;
+              if ((pos_[i] - pos_[j]).squaredNorm() > reach * reach) continue;
+              if ((rest_.row(Eigen::Index(i)) - rest_.row(Eigen::Index(j))).squaredNorm() < exclude * exclude) continue;
+              out.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
+            }
           }
-        }
+    }
   }
+  for (const auto& f : found) self_pairs_.insert(self_pairs_.end(), f.begin(), f.end());
+  std::sort(self_pairs_.begin(), self_pairs_.end());
 }
 
 // The projections below run inside the sweep's parallel region (substep): each `omp for` splits
