@@ -31,6 +31,7 @@
 #include "tbsp/io/studio.h"
 #include "tbsp/io/tet_mesh_io.h"
 #include "tbsp/io/range_scan_conf.h"
+#include "tbsp/cloth/retarget.h"
 #include "tbsp/plugins/constraints_json.h"
 #include "tbsp/plugins/fit_json.h"
 #include "tbsp/plugins/json_file.h"
@@ -148,6 +149,14 @@ const std::map<std::string, Target>& targets() {
       {"texture", {"t.json", [](const std::string& p) { parse_texture_constraints(load_json_file(p), p); }}},
       {"marker_map", {"map.json", [](const std::string& p) { load_marker_map_json(p); }}},
       {"cloth_model", {"model.json", [](const std::string& p) { load_animatable_model(p); }}},
+      // a --joint-map string against the CMU skeleton's joints and the Bandai-Namco clip's
+      {"joint_map", {"map.txt", [](const std::string& p) {
+                       std::ifstream in(p, std::ios::binary);
+                       const std::string spec((std::istreambuf_iterator<char>(in)), {});
+                       const std::vector<std::string> model = {"hip", "abdomen", "chest", "lThigh", "lShin", "lFoot", "lFoot_End"};
+                       const std::vector<std::string> clip = {"joint_Root", "Hips", "Spine", "Chest", "UpperLeg_L", "LowerLeg_L", "Foot_L"};
+                       parse_joint_map(spec, model, clip);
+                     }}},
       {"pipeline", {"p.yaml", [](const std::string& p) { pipeline::load_pipeline(p, fuzz_registry()); }}},
   };
   return t;

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -15,6 +16,7 @@
 #include "tbsp/cloth/collision_proxies.h"
 #include "tbsp/core/error.h"
 #include "tbsp/io/atomic_file.h"
+#include "tbsp/cloth/retarget.h"
 #include "tbsp/io/bvh_skeleton.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/plugins/cloth_model_json.h"
@@ -170,7 +172,7 @@ int cmd_proxies(const ProxiesArgs& a) {
 // ---- tbsp cloth animate
 
 struct AnimateArgs {
-  std::string model, bvh, out, frames;
+  std::string model, bvh, out, frames, joint_map;
   double scale = 0.01;
   int step = 3, every = 1, sheet = 8, settle = 40;
   bool no_meshes = false, quiet = false;
@@ -179,7 +181,10 @@ struct AnimateArgs {
 void add_animate(CLI::App& cloth, AnimateArgs& a, CLI::App*& sub) {
   sub = cloth.add_subcommand("animate", "a new animation: an animatable model driven by a BVH clip (skinning + cloth simulation)");
   sub->add_option("--model", a.model, "model JSON from `tbsp cloth build`")->required();
-  sub->add_option("--bvh", a.bvh, "BVH clip with the model's joint names")->required();
+  sub->add_option("--bvh", a.bvh, "BVH clip with the model's joint names (or any clip with --joint-map)")->required();
+  sub->add_option("--joint-map", a.joint_map,
+                  "retarget a clip of another skeleton: \"model=clip,model=clip,...\" (joint names; the roots and the limbs at least; "
+                  "docs/cloth.md lists the CMU <- Bandai-Namco map)");
   sub->add_option("--out", a.out, "output folder: mesh_FFFF.ply (FFFF = BVH frame), animate_report.json, contact_sheet.png")->required();
   sub->add_option("--frames", a.frames, "BVH frames a:b (inclusive; default all)");
   sub->add_option("--step", a.step, "BVH frames per simulated frame (default 3: a 120 Hz clip at 40 Hz); the simulation step is step × the clip's frame time")->check(CLI::PositiveNumber);
@@ -197,13 +202,29 @@ int cmd_animate(const AnimateArgs& a) {
   // the simulation advances by the clip's time between two simulated frames (a 30 Hz clip at
   // --step 1 and a 120 Hz clip at --step 4 both step 1/30 s)
   model.settings.time_step = a.step * clip.frame_time;
-  require_bvh_joints(clip, model.skeleton.names, a.bvh);
+  if (a.joint_map.empty()) require_bvh_joints(clip, model.skeleton.names, a.bvh);
   int f0 = 0, f1 = clip.numFrames() - 1;
   if (!a.frames.empty()) {
     std::istringstream is(a.frames);
     char c = 0;
     if (!(is >> f0) || !(is >> c) || c != ':' || !(is >> f1) || f0 < 0 || f1 < f0 || f1 >= clip.numFrames())
       throw InvalidInput("--frames '" + a.frames + "': expected a:b with 0 <= a <= b < " + std::to_string(clip.numFrames()));
+  }
+  // --joint-map: the clip's joint positions drive the model's skeleton (PoseRetargeter)
+  std::unique_ptr<PoseRetargeter> retarget;
+  auto clip_positions = [&](int f) {
+    const SkeletonPose g = bvh_pose(clip, f, a.scale);
+    Eigen::MatrixX3d Q(Eigen::Index(g.size()), 3);
+    for (std::size_t j = 0; j < g.size(); ++j) Q.row(Eigen::Index(j)) = g[j].translation().transpose();
+    return Q;
+  };
+  if (!a.joint_map.empty()) {
+    try {
+      retarget = std::make_unique<PoseRetargeter>(model.skeleton, parse_joint_map(a.joint_map, model.skeleton.names, skeleton_from_bvh(clip).names),
+                                                  clip_positions(f0));
+    } catch (const InvalidInput& e) {
+      throw InvalidInput("--joint-map for " + a.bvh + ": " + e.what());
+    }
   }
   make_out_dir(a.out);
   ModelAnimator anim(model);
@@ -220,7 +241,8 @@ int cmd_animate(const AnimateArgs& a) {
   int written = 0;
   for (int k = 0; k < n; ++k) {
     const auto t0 = std::chrono::steady_clock::now();
-    const SkeletonPose pose = pose_by_name(model.skeleton, clip, bvh_frames[std::size_t(k)], a.scale, a.bvh);
+    const int bf = bvh_frames[std::size_t(k)];
+    const SkeletonPose pose = retarget ? retarget->retarget(clip_positions(bf)) : pose_by_name(model.skeleton, clip, bf, a.scale, a.bvh);
     const Eigen::MatrixX3d& V = k == 0 ? anim.start(pose, a.settle) : anim.step(pose);
     const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     total += k ? sec : 0;
@@ -248,6 +270,10 @@ int cmd_animate(const AnimateArgs& a) {
   rep["frames"] = n;
   rep["bvh_frames"] = {f0, f1, a.step};
   rep["time_step"] = model.settings.time_step;
+  if (retarget) {
+    rep["joint_map"] = a.joint_map;
+    rep["retarget_scale"] = retarget->scale();
+  }
   rep["meshes_written"] = written;
   rep["frames_per_second"] = n > 1 ? (n - 1) / std::max(total, 1e-9) : 0.0;
   rep["worst_strain_p99"] = worst_strain;

@@ -92,6 +92,30 @@ TEST(CliCloth, SynthSegmentBuildAnimate) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("lacks joint"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(d / "anim2"));
+  // a clip of another skeleton (Bandai-Namco walk: other names, lengths and local axes) retargeted
+  const std::string walk = std::string(TBSP_SHARED_DATA_DIR) +
+                           "/capture/BandaiNamcoResearchInc__Bandai-Namco-Research-Motiondataset/dataset/Bandai-Namco-Research-Motiondataset-1/"
+                           "data/dataset-1_walk_normal_001.bvh";
+  TBSP_REQUIRE_FILE(walk);
+  const std::string map =
+      "hip=Hips,abdomen=Spine,chest=Chest,neck=Neck,head=Head,lCollar=Shoulder_L,lShldr=UpperArm_L,lForeArm=LowerArm_L,lHand=Hand_L,"
+      "rCollar=Shoulder_R,rShldr=UpperArm_R,rForeArm=LowerArm_R,rHand=Hand_R,lThigh=UpperLeg_L,lShin=LowerLeg_L,lFoot=Foot_L,"
+      "rThigh=UpperLeg_R,rShin=LowerLeg_R,rFoot=Foot_R";
+  r = run_cli("cloth animate --model " + (d / "model.json").string() + " --bvh " + walk + " --joint-map " + map +
+                  " --step 1 --frames 0:39 --no-meshes --contact-sheet 0 --out " + (d / "anim3").string() + " -q",
+              d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto rep3 = read_json(d / "anim3" / "animate_report.json");
+  EXPECT_EQ(rep3["frames"].get<int>(), 40);
+  EXPECT_LT(rep3["worst_strain_p99"].get<double>(), 0.5);
+  EXPECT_GT(rep3["retarget_scale"].get<double>(), 0.3);
+  // a map naming a joint the clip lacks: named, nothing written
+  r = run_cli("cloth animate --model " + (d / "model.json").string() + " --bvh " + walk + " --joint-map hip=Pelvis --out " +
+                  (d / "anim4").string(),
+              d);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("clip has no joint 'Pelvis'"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d / "anim4"));
   fs::remove_all(d);
 }
 
