@@ -53,6 +53,7 @@ bool PerformanceCaptureOptions::isValid(std::string* why) const {
   if (!(failure_iou >= 0) || !(failure_iou < 1)) return fail("failure_iou must be in [0, 1)");
   if (!features && !silhouettes) return fail("features and silhouettes are both off: nothing would drive the template");
   if (hull_resolution < 16 || hull_resolution > 1024) return fail("hull_resolution must be in 16..1024");
+  if (!(hull_min_iou_gain >= 0 && hull_min_iou_gain <= 1)) return fail("hull_min_iou_gain must be in [0, 1]");
   return true;
 }
 
@@ -231,9 +232,9 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
         reg = register_to_visual_hull(template_, cameras_, silhouettes, ho);
         if (!(reg.iou_before > 0))  // a template nowhere near the performer is an error below, not a start for ICP
           message = "the template covers no silhouette pixel: it was not registered";
-        else if (!(reg.iou_after > reg.iou_before))
-          message = "the registration did not raise the mean silhouette IoU (" + std::to_string(reg.iou_before) + " -> " +
-                    std::to_string(reg.iou_after) + "): the template was used as given";
+        else if (!(reg.iou_after >= reg.iou_before + options_.hull_min_iou_gain))
+          message = "the registration did not raise the mean silhouette IoU by " + std::to_string(options_.hull_min_iou_gain) + " (" +
+                    std::to_string(reg.iou_before) + " -> " + std::to_string(reg.iou_after) + "): the template was used as given";
       } catch (const InvalidInput& e) {
         message = std::string("no visual hull: ") + e.what() + "; the template was used as given";
       }
