@@ -9,7 +9,6 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -99,9 +98,7 @@ void expect_within(const RealResult& r, const Bounds& b) {
 // vertices inside the hull (within one voxel).
 double hull_check(const RealCase& c, const RealResult& r) {
   VisualHullOptions ho;
-  const auto t0 = std::chrono::steady_clock::now();
   const VisualHull h = compute_visual_hull(c.cams, c.silhouettes, ho);
-  std::printf("  hull alone %.2f s, dims %d %d %d, doublings %d\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), h.dims.x(), h.dims.y(), h.dims.z(), h.box_doublings);
   long inside = 0;
   for (Eigen::Index i = 0; i < r.refined.V.rows(); ++i) {
     const Eigen::Vector3d g = (r.refined.V.row(i).transpose() - h.origin) / h.voxel;
