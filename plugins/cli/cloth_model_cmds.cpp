@@ -213,10 +213,7 @@ int cmd_animate(const AnimateArgs& a) {
   // --joint-map: the clip's joint positions drive the model's skeleton (PoseRetargeter)
   std::unique_ptr<PoseRetargeter> retarget;
   auto clip_positions = [&](int f) {
-    const SkeletonPose g = bvh_pose(clip, f, a.scale);
-    Eigen::MatrixX3d Q(Eigen::Index(g.size()), 3);
-    for (std::size_t j = 0; j < g.size(); ++j) Q.row(Eigen::Index(j)) = g[j].translation().transpose();
-    return Q;
+    return joint_positions(bvh_pose(clip, f, a.scale));
   };
   if (!a.joint_map.empty()) {
     try {

@@ -21,12 +21,6 @@ const char* kWalk =
     "capture/BandaiNamcoResearchInc__Bandai-Namco-Research-Motiondataset/dataset/Bandai-Namco-Research-Motiondataset-1/data/"
     "dataset-1_walk_normal_001.bvh";
 
-Eigen::MatrixX3d positions(const SkeletonPose& p) {
-  Eigen::MatrixX3d X(Eigen::Index(p.size()), 3);
-  for (std::size_t j = 0; j < p.size(); ++j) X.row(Eigen::Index(j)) = p[j].translation().transpose();
-  return X;
-}
-
 }  // namespace
 
 // The joint map of docs/cloth.md: the CMU ("Daz-friendly") skeleton driven by a Bandai-Namco clip.
@@ -41,11 +35,11 @@ TEST(Retarget, AClipOnItsOwnSkeletonIsReproduced) {
   const Skeleton model = skeleton_from_bvh(clip, 0, 0.01);
   std::vector<int> identity(model.names.size());
   for (std::size_t j = 0; j < identity.size(); ++j) identity[j] = int(j);
-  const PoseRetargeter rt(model, identity, positions(bvh_pose(clip, 0, 0.01)));
+  const PoseRetargeter rt(model, identity, joint_positions(bvh_pose(clip, 0, 0.01)));
   EXPECT_NEAR(rt.scale(), 1.0, 1e-12);
   for (int f : {0, 200, 900, 1800}) {
-    const Eigen::MatrixX3d truth = positions(bvh_pose(clip, f, 0.01));
-    const Eigen::MatrixX3d got = positions(rt.retarget(truth));
+    const Eigen::MatrixX3d truth = joint_positions(bvh_pose(clip, f, 0.01));
+    const Eigen::MatrixX3d got = joint_positions(rt.retarget(truth));
     EXPECT_LT((got - truth).rowwise().norm().maxCoeff(), 1e-9) << "frame " << f;
   }
 }
@@ -57,11 +51,11 @@ TEST(Retarget, BandaiWalkDrivesTheCmuSkeleton) {
   const BvhMotion walk = read_bvh(test::shared(kWalk));
   const Skeleton clip = skeleton_from_bvh(walk, -1, 0.01);
   const std::vector<int> src = parse_joint_map(kCmuFromBandai, model.names, clip.names);
-  const PoseRetargeter rt(model, src, positions(bvh_pose(walk, 0, 0.01)));
+  const PoseRetargeter rt(model, src, joint_positions(bvh_pose(walk, 0, 0.01)));
   double worst_angle = 0, worst_length = 0;
   for (int f = 0; f < walk.numFrames(); f += 5) {
-    const Eigen::MatrixX3d Q = positions(bvh_pose(walk, f, 0.01));
-    const Eigen::MatrixX3d X = positions(rt.retarget(Q));
+    const Eigen::MatrixX3d Q = joint_positions(bvh_pose(walk, f, 0.01));
+    const Eigen::MatrixX3d X = joint_positions(rt.retarget(Q));
     ASSERT_TRUE(X.allFinite());
     // bones of a single mapped child (shin: thigh -> knee, forearm, ...) follow the clip's bone
     for (const auto& [m, d] : {std::pair<const char*, const char*>{"lThigh", "lShin"}, {"lShin", "lFoot"}, {"rThigh", "rShin"}, {"rShin", "rFoot"},
@@ -73,7 +67,7 @@ TEST(Retarget, BandaiWalkDrivesTheCmuSkeleton) {
       worst_length = std::max(worst_length, std::abs(a.norm() - rest));
     }
   }
-  const Eigen::MatrixX3d last = positions(rt.retarget(positions(bvh_pose(walk, walk.numFrames() - 1, 0.01))));
+  const Eigen::MatrixX3d last = joint_positions(rt.retarget(joint_positions(bvh_pose(walk, walk.numFrames() - 1, 0.01))));
   const int hip = model.jointIndex("hip");
   const double travel = (last.row(hip) - model.restPosition(hip).transpose()).norm();
   std::printf("Bandai walk on the CMU skeleton: rho %.3f, worst single-bone angle %.2e rad, worst bone length change %.2e m, hip travel %.2f m\n",

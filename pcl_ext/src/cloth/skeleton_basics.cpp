@@ -53,4 +53,10 @@ std::vector<Eigen::Isometry3d> skinning_transforms(const Skeleton& s, const Skel
   return T;
 }
 
+Eigen::MatrixX3d joint_positions(const SkeletonPose& pose) {
+  Eigen::MatrixX3d X(Eigen::Index(pose.size()), 3);
+  for (std::size_t j = 0; j < pose.size(); ++j) X.row(Eigen::Index(j)) = pose[j].translation().transpose();
+  return X;
+}
+
 }  // namespace tbsp

@@ -49,6 +49,10 @@ void validate_skeleton(const Skeleton& skeleton, const char* where = "tbsp::Skel
 /// \throws InvalidInput when pose.size() differs from the joint count.
 std::vector<Eigen::Isometry3d> skinning_transforms(const Skeleton& skeleton, const SkeletonPose& pose);
 
+/// \brief Joint positions of a pose: #J by 3, row j = the translation of pose[j] (same units).
+/// Complexity O(#J).
+Eigen::MatrixX3d joint_positions(const SkeletonPose& pose);
+
 /// Skinning weights: #V by #J, row-major sparse, each row non-negative and summing to 1.
 using SkinningWeights = Eigen::SparseMatrix<double, Eigen::RowMajor>;
 
