@@ -327,6 +327,7 @@ void stereo_rows(int frames, int size) {
 int main(int argc, char** argv) {
   int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0, stereo = 0, hull = 0;
   bool capture_only = false, vlasic_turn = false;
+  int capture_detail = 1;
   int keyframes = 0;
   double keyframe_iou = 0.98;
   for (int i = 1; i < argc; ++i) {
@@ -334,6 +335,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--capture-frames") && i + 1 < argc) capture_frames = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--capture-size") && i + 1 < argc) capture_size = std::max(64, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--capture-only")) capture_only = true;
+    else if (!std::strcmp(argv[i], "--capture-detail") && i + 1 < argc) capture_detail = std::clamp(std::atoi(argv[++i]), 1, 2);
     else if (!std::strcmp(argv[i], "--vlasic") && i + 1 < argc) vlasic = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--stereo") && i + 1 < argc) stereo = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--vlasic-turn")) vlasic_turn = true;
@@ -341,12 +343,12 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--keyframes") && i + 1 < argc) keyframes = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--keyframe-iou") && i + 1 < argc) keyframe_iou = std::atof(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only] [--vlasic STEPS [--vlasic-turn] [--keyframes N [--keyframe-iou X]]] [--stereo FRAMES] [--hull FRAMES]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn] [--keyframes N [--keyframe-iou X]]] [--stereo FRAMES] [--hull FRAMES]\n");
       return 2;
     }
   }
   if (capture_only || vlasic > 0 || stereo > 0 || hull > 0) {
-    if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {1});
+    if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {capture_detail});
     if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_turn, keyframes, keyframe_iou);
     if (stereo > 0) stereo_rows(stereo, capture_size);
     if (hull > 0) hull_rows(hull, capture_size);

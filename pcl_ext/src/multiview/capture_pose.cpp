@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include <cblas.h>
 #include <nlopt.h>
 
 #include "tbsp/core/error.h"
@@ -31,6 +32,49 @@ Eigen::Matrix3d constraint_projector(const RayConstraint& c) {
   return Eigen::Matrix3d::Identity() - d * d.transpose();
 }
 
+int constraint_projector_basis(const RayConstraint& c, Eigen::Vector3d u[2]) {
+  if (c.plane_normal.squaredNorm() > 0) {
+    u[0] = c.plane_normal.normalized();
+    return 1;
+  }
+  const Eigen::Vector3d d = c.dir.normalized();
+  u[0] = d.unitOrthogonal();
+  u[1] = d.cross(u[0]);
+  return 2;
+}
+
+Eigen::MatrixXd assemble_constraint_normals(const Eigen::MatrixXd& M, const std::vector<RayConstraint>& C, const std::vector<double>& omega) {
+  const Eigen::Index H = M.cols(), n3 = 3 * H;
+  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(n3, n3);
+  // N = Jᵀ J with one row of J per projector direction u of a constraint i:
+  // J_row = sqrt(ω_i) / s_i · (u ⊗ m_i) (column block c holds u_c · m_i), since
+  // P_i ⊗ m_i m_iᵀ = Σ_u (u ⊗ m_i)(u ⊗ m_i)ᵀ. Rows go to BLAS in fixed blocks (symmetric rank-k
+  // updates of the lower triangle): the summation order does not depend on the thread count.
+  constexpr Eigen::Index kBlock = 1024;
+  const Eigen::MatrixXd Mt = M.transpose();
+  Eigen::MatrixXd Jt(n3, kBlock);  // Jᵀ: one column per row of J (contiguous writes)
+  Eigen::Index rows = 0;
+  auto flush = [&]() {
+    if (rows == 0) return;
+    cblas_dsyrk(CblasColMajor, CblasLower, CblasNoTrans, int(n3), int(rows), 1.0, Jt.data(), int(n3), 1.0, N.data(), int(n3));
+    rows = 0;
+  };
+  for (std::size_t i = 0; i < C.size(); ++i) {
+    if (omega[i] == 0) continue;
+    Eigen::Vector3d u[2];
+    const int rank = constraint_projector_basis(C[i], u);
+    const double f = std::sqrt(omega[i]) / C[i].pixel_size;
+    for (int r = 0; r < rank; ++r) {
+      if (rows == kBlock) flush();
+      for (int c = 0; c < 3; ++c) Jt.col(rows).segment(c * H, H) = (f * u[r](c)) * Mt.col(Eigen::Index(i));
+      ++rows;
+    }
+  }
+  flush();
+  N.triangularView<Eigen::StrictlyUpper>() = N.transpose();
+  return N;
+}
+
 HandleSolveResult solve_handles(const Eigen::MatrixXd& R, const Eigen::MatrixXd& K, const std::vector<RayConstraint>& C,
                                 const HandleSolveOptions& o) {
   const Eigen::Index H = R.cols(), nc = Eigen::Index(C.size());
@@ -56,19 +100,9 @@ HandleSolveResult solve_handles(const Eigen::MatrixXd& R, const Eigen::MatrixXd&
   for (std::size_t i = 0; i < C.size(); ++i) omega[i] = C[i].weight;
   std::vector<double> resid(C.size(), 0.0);
   for (int round = 0; round <= o.reweights; ++round) {
-    Eigen::MatrixXd N = Eigen::MatrixXd::Zero(3 * H, 3 * H);
+    Eigen::MatrixXd N = assemble_constraint_normals(M, C, omega);
     Eigen::VectorXd b = Eigen::VectorXd::Zero(3 * H);
     Eigen::VectorXd a(nc);
-    for (int c = 0; c < 3; ++c)
-      for (int q = c; q < 3; ++q) {
-        for (Eigen::Index i = 0; i < nc; ++i) {
-          const RayConstraint& k = C[std::size_t(i)];
-          a(i) = omega[std::size_t(i)] * P[std::size_t(i)](c, q) / (k.pixel_size * k.pixel_size);
-        }
-        const Eigen::MatrixXd blk = M.transpose() * (a.asDiagonal() * M);
-        N.block(c * H, q * H, H, H) = blk;
-        if (q != c) N.block(q * H, c * H, H, H) = blk.transpose();
-      }
     for (int c = 0; c < 3; ++c) {
       for (Eigen::Index i = 0; i < nc; ++i) {
         const RayConstraint& k = C[std::size_t(i)];

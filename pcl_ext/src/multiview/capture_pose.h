@@ -30,6 +30,13 @@ struct RayConstraint {
 };
 /// P (3x3) of a constraint: I - d dᵀ for a ray, n nᵀ for a plane.
 Eigen::Matrix3d constraint_projector(const RayConstraint& c);
+/// Orthonormal directions u with P = Σ u uᵀ: one for a plane, two for a ray. Returns how many.
+int constraint_projector_basis(const RayConstraint& c, Eigen::Vector3d u[2]);
+/// Σ_i ω_i / s_i² · P_i ⊗ m_i m_iᵀ (3·#cols square; block (c, q) = Σ_i ω_i P_i(c, q) / s_i² m_i m_iᵀ)
+/// for the rows m_i of M: the constraints' part of solve_handles' normal equations, by BLAS
+/// symmetric rank-k updates. O(#rows · 9 · #cols²).
+Eigen::MatrixXd assemble_constraint_normals(const Eigen::MatrixXd& M, const std::vector<RayConstraint>& constraints,
+                                            const std::vector<double>& omega);
 
 struct HandleSolveOptions {
   double smoothness = 0.2;  ///< weight of the handle stiffness (per template edge, pixels²)

@@ -83,10 +83,12 @@ void SilhouetteRefinement::refine(TriMesh& refined) {
   }
   std::vector<detail::SilhouetteOverlap> best_ov = ov;
   int stale = 0;
+  LaplacianDeformer D;
   for (int it = 1; it <= o.max_iterations; ++it) {
     report_progress(progress_, (it - 1.0) / o.max_iterations, "iteration " + std::to_string(it));
-    LaplacianDeformer D;
-    D.setMesh(current);  // L and δ of the current mesh (§6.3.1)
+    D.clearConstraints();
+    D.setMesh(current);  // L and δ of the current mesh (§6.3.1); the connectivity, so the
+                         // factorization's symbolic analysis, stays: it is reused
     D.setAnchor(o.anchor);
     std::vector<int> per_view(n, 0);
     for (int k = 0; k < n; ++k) {

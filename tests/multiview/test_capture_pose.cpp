@@ -1,0 +1,92 @@
+// The pose step of PerformanceCapture (internal: pcl_ext/src/multiview/capture_pose.h): the
+// normal equations assembled by BLAS rank-k updates against the textbook sum, and the handle
+// solve recovering a known handle move.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "capture_pose.h"
+
+using namespace tbsp;
+using namespace tbsp::detail;
+
+namespace {
+
+// Constraints on the rows of M at random points: a ray or a plane through p + m_i·Δh.
+std::vector<RayConstraint> make_constraints(const Eigen::MatrixXd& M, const Eigen::MatrixX3d& dh, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> g(0, 1);
+  std::uniform_real_distribution<double> u(0.5, 2.0);
+  auto unit = [&]() { return Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized(); };
+  std::vector<RayConstraint> C(std::size_t(M.rows()));
+  for (Eigen::Index i = 0; i < M.rows(); ++i) {
+    RayConstraint& c = C[std::size_t(i)];
+    c.v[0] = int(i);
+    c.w[0] = 1;
+    c.p = Eigen::Vector3d(g(rng), g(rng), g(rng));
+    const Eigen::Vector3d q = c.p + (M.row(i) * dh).transpose();  // where the point must go
+    c.pixel_size = u(rng);
+    c.weight = u(rng);
+    if (i % 3 == 0) {  // plane (a silhouette rim)
+      c.plane_normal = unit();
+      c.origin = q + c.plane_normal.cross(unit());  // in the plane
+      c.dir = unit();
+      c.feature = false;
+    } else {
+      c.dir = unit() * u(rng);  // not normalized: the projector normalizes it
+      c.origin = q - 2.5 * c.dir;
+    }
+  }
+  return C;
+}
+
+}  // namespace
+
+TEST(CapturePose, RankUpdateNormalsEqualTheDirectSum) {
+  const Eigen::Index H = 7, nc = 2500;  // > one block of 1024 rows
+  std::mt19937 rng(3);
+  std::normal_distribution<double> g(0, 1);
+  Eigen::MatrixXd M(nc, H);
+  for (Eigen::Index i = 0; i < M.size(); ++i) M.data()[i] = g(rng);
+  const std::vector<RayConstraint> C = make_constraints(M, Eigen::MatrixX3d::Zero(H, 3), 5);
+  std::vector<double> omega(C.size());
+  for (std::size_t i = 0; i < C.size(); ++i) omega[i] = i % 11 == 0 ? 0.0 : C[i].weight * (1 + 0.1 * double(i % 5));
+  Eigen::MatrixXd direct = Eigen::MatrixXd::Zero(3 * H, 3 * H);
+  for (std::size_t i = 0; i < C.size(); ++i) {
+    const Eigen::Matrix3d P = constraint_projector(C[i]);
+    const Eigen::MatrixXd mm = M.row(Eigen::Index(i)).transpose() * M.row(Eigen::Index(i));
+    for (int c = 0; c < 3; ++c)
+      for (int q = 0; q < 3; ++q) direct.block(c * H, q * H, H, H) += omega[i] * P(c, q) / (C[i].pixel_size * C[i].pixel_size) * mm;
+  }
+  const Eigen::MatrixXd N = assemble_constraint_normals(M, C, omega);
+  EXPECT_LT((N - direct).cwiseAbs().maxCoeff(), 1e-11 * direct.cwiseAbs().maxCoeff());
+  EXPECT_EQ((N - N.transpose()).cwiseAbs().maxCoeff(), 0.0);
+  for (const RayConstraint& c : C) {  // the basis spans the projector
+    Eigen::Vector3d u[2];
+    const int r = constraint_projector_basis(c, u);
+    Eigen::Matrix3d P = Eigen::Matrix3d::Zero();
+    for (int k = 0; k < r; ++k) P += u[k] * u[k].transpose();
+    EXPECT_LT((P - constraint_projector(c)).cwiseAbs().maxCoeff(), 1e-14);
+  }
+}
+
+TEST(CapturePose, SolveHandlesRecoversAKnownHandleMove) {
+  const Eigen::Index H = 6, nc = 400;
+  std::mt19937 rng(11);
+  std::normal_distribution<double> g(0, 1);
+  Eigen::MatrixXd R(nc, H);  // response: one template vertex per constraint
+  for (Eigen::Index i = 0; i < R.size(); ++i) R.data()[i] = g(rng);
+  Eigen::MatrixX3d dh(H, 3);
+  for (Eigen::Index i = 0; i < dh.size(); ++i) dh.data()[i] = 0.3 * g(rng);
+  std::vector<RayConstraint> C = make_constraints(R, dh, 13);
+  // a few gross outliers: rejected by the robust re-solves
+  for (std::size_t i = 1; i < C.size(); i += 50) C[i].origin += 40.0 * C[i].pixel_size * C[i].dir.normalized().unitOrthogonal();
+  HandleSolveOptions o;
+  o.smoothness = 0;
+  o.prior = 1e-12;
+  const Eigen::MatrixXd K = Eigen::MatrixXd::Zero(H, H);
+  const HandleSolveResult res = solve_handles(R, K, C, o);
+  EXPECT_LT((res.dh - dh).cwiseAbs().maxCoeff(), 1e-8);
+  EXPECT_EQ(res.feature_inliers + res.rim_inliers, int(C.size()) - 8);
+  EXPECT_LT(res.median_residual_px, 1e-8);
+}
