@@ -2,6 +2,9 @@
 // every view and compared with the observations. The search is in cloth_parameter_search.cpp.
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
 
 #include "../multiview/capture_features.h"
 #include "tbsp/cloth/cloth_parameter_estimation.h"
@@ -103,6 +106,29 @@ bool visible(const RenderBuffers& b, const Eigen::Vector2d& q, double z) {
   return std::isfinite(d) && z <= d * 1.01;
 }
 
+// The camera cropped to the pixels the mesh can cover (the box of its projected vertices, 2 px
+// of margin): the same projection shifted by the crop's corner `offset`. The renders of a body in
+// a studio view cover a fraction of the image; clearing and scanning only the crop is what a
+// sample's eight renders per frame cost.
+Camera crop_to_mesh(const Camera& cam, const Eigen::MatrixX3d& V, Eigen::Vector2i& offset) {
+  double x0 = std::numeric_limits<double>::infinity(), y0 = x0, x1 = -x0, y1 = -x0;
+  for (Eigen::Index i = 0; i < V.rows(); ++i) {
+    const Eigen::Vector3d X = V.row(i).transpose();
+    if (!(cam.depth(X) > 0)) return offset = Eigen::Vector2i::Zero(), cam;  // behind the camera: no crop
+    const Eigen::Vector2d q = cam.project(X);
+    x0 = std::min(x0, q.x()), x1 = std::max(x1, q.x()), y0 = std::min(y0, q.y()), y1 = std::max(y1, q.y());
+  }
+  if (!(x1 >= x0) || !std::isfinite(x0 + x1 + y0 + y1)) return offset = Eigen::Vector2i::Zero(), cam;
+  const int W = cam.width(), H = cam.height();
+  const int a = std::clamp(int(std::floor(x0)) - 2, 0, W - 1), b = std::clamp(int(std::ceil(x1)) + 2, 0, W - 1);
+  const int c = std::clamp(int(std::floor(y0)) - 2, 0, H - 1), d = std::clamp(int(std::ceil(y1)) + 2, 0, H - 1);
+  offset = Eigen::Vector2i(a, c);
+  Eigen::Matrix3d K = cam.K();
+  K(0, 2) -= a;
+  K(1, 2) -= c;
+  return Camera(cam.name(), b - a + 1, d - c + 1, K, cam.R(), cam.t(), cam.distortion());
+}
+
 }  // namespace
 
 ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMaterial& rho) const {
@@ -120,73 +146,115 @@ ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMateria
   const auto& cams = obs_.cameras();
   const int views = obs_.numViews(), frames = obs_.numFrames(), stride = options_.frame_stride;
   const double cap2 = options_.max_pixel_error * options_.max_pixel_error;
-  Rasterizer raster;
-  std::vector<RenderBuffers> prev(static_cast<std::size_t>(views)), cur(static_cast<std::size_t>(views));
-  bool prev_valid = false;
   const int W = options_.window;
   if (W > 0 && !reference_)
     throw InvalidInput("[tbsp::ClothParameterEstimation] window = " + std::to_string(W) +
                        " restarts the simulation from the reference mesh sequence: call setReferenceSequence, or set window = 0 (the whole sequence)");
   const double dt = m.settings.time_step;
-  ModelAnimator anim(m);
-  TriMesh mesh;
-  mesh.F = m.mesh.F;
+  // Sums over the evaluated frames of one window.
+  struct Partial {
+    double sum = 0, sil = 0, sift = 0;
+    long rim_samples = 0, feature_samples = 0;
+    int frames = 0;
+  };
+  // Frames [n0, n1): one simulation restarted at n0 (from the reference with a window, else from
+  // the settled first pose), rendered into every view and compared with the observations.
+  auto run = [&](int n0, int n1, Partial& e) {
+    Rasterizer raster;
+    std::vector<RenderBuffers> prev(static_cast<std::size_t>(views)), cur(static_cast<std::size_t>(views));
+    std::vector<Eigen::Vector2i> prev_off(static_cast<std::size_t>(views)), cur_off(static_cast<std::size_t>(views));  // crop corners
+    std::vector<Camera> crop(static_cast<std::size_t>(views));
+    bool prev_valid = false;
+    ModelAnimator anim(m);
+    TriMesh mesh;
+    mesh.F = m.mesh.F;
+    for (int n = n0; n < n1; ++n) {
+      const bool restart = n == n0;
+      if (restart && W > 0) {
+        const auto& ref = *reference_;
+        const std::size_t a = std::size_t(n > 0 ? n - 1 : 0), b = std::size_t(n > 0 ? n : std::min(1, frames - 1));
+        mesh.V = anim.startFrom(poses_[std::size_t(n)], ref[std::size_t(n)], (ref[b] - ref[a]) / dt);
+      } else {
+        mesh.V = restart ? anim.start(poses_[0], options_.settle_frames) : anim.step(poses_[std::size_t(n)]);
+      }
+      const bool evaluated = !restart && n % stride == 0;
+      const bool lift = (n + 1) % stride == 0 && n + 1 < n1;  // the next frame is evaluated
+      if (!evaluated && !lift) {
+        prev_valid = false;
+        continue;
+      }
+      for (int k = 0; k < views; ++k) {
+        crop[std::size_t(k)] = crop_to_mesh(cams[std::size_t(k)], mesh.V, cur_off[std::size_t(k)]);
+        raster.render(mesh, crop[std::size_t(k)], cur[std::size_t(k)]);
+      }
+      if (evaluated) {
+        FrameTerms t;
+        for (int k = 0; k < views; ++k) {
+          const Camera& cam = cams[std::size_t(k)];
+          for (int v : rim_vertices(mesh, crop[std::size_t(k)], cur[std::size_t(k)])) {
+            if (!in_region[std::size_t(v)]) continue;
+            const double d = obs_.boundaryDistance(n, k, cam.project(mesh.V.row(v).transpose()));
+            t.sil += std::min(d * d, cap2);
+            ++t.nsil;
+          }
+          if (!prev_valid) continue;
+          const RenderBuffers& b = prev[std::size_t(k)];
+          const Eigen::Vector2i& o = prev_off[std::size_t(k)];
+          const Eigen::Vector2d co = cur_off[std::size_t(k)].cast<double>();
+          for (const FeaturePair& p : obs_.correspondences(n, k)) {
+            const int x = int(std::lround(p.from.x())) - o.x(), y = int(std::lround(p.from.y())) - o.y();
+            if (x < 0 || y < 0 || x >= b.width || y >= b.height) continue;
+            const std::size_t at = std::size_t(y) * std::size_t(b.width) + std::size_t(x);
+            const int face = b.face[at];
+            if (face < 0 || !face_in[std::size_t(face)] || !detail::smooth_depth(b, x, y)) continue;
+            const double b1 = b.bary[2 * at], b2 = b.bary[2 * at + 1];
+            const Eigen::Vector3d X = detail::surface_point(mesh, face, Eigen::Vector3d(1 - b1 - b2, b1, b2));
+            if (!(cam.depth(X) > 0)) continue;
+            const Eigen::Vector2d q = cam.project(X);
+            if (!visible(cur[std::size_t(k)], q - co, cam.depth(X))) continue;  // occluded at frame n: the feature cannot be this point
+            const double d2 = (q - p.to.cast<double>()).squaredNorm();
+            t.sift += std::min(d2, cap2);
+            ++t.nsift;
+          }
+        }
+        const double es = t.nsil ? t.sil / double(t.nsil) : 0.0, ef = t.nsift ? t.sift / double(t.nsift) : 0.0;
+        e.sum += options_.alpha * es + options_.beta * ef;
+        e.sil += es;
+        e.sift += ef;
+        e.rim_samples += t.nsil;
+        e.feature_samples += t.nsift;
+        ++e.frames;
+      }
+      std::swap(prev, cur);
+      std::swap(prev_off, cur_off);
+      prev_valid = true;
+    }
+  };
+  // With a window the windows are independent simulations: run in parallel (when this is not
+  // already one of several samples evaluated in parallel), summed in window order, so the result
+  // does not depend on the thread count.
+  const int nwin = W > 0 ? (frames + W - 1) / W : 1;
+  std::vector<Partial> part(static_cast<std::size_t>(nwin));
+  std::vector<std::string> errors(static_cast<std::size_t>(nwin));
+#pragma omp parallel for schedule(dynamic, 1) if (nwin > 1)
+  for (int w = 0; w < nwin; ++w) {
+    try {
+      run(W > 0 ? w * W : 0, W > 0 ? std::min(frames, (w + 1) * W) : frames, part[std::size_t(w)]);
+    } catch (const std::exception& ex) {
+      errors[std::size_t(w)] = ex.what();
+    }
+  }
+  for (const std::string& msg : errors)
+    if (!msg.empty()) throw InvalidInput(msg);
   ClothFitEnergy e;
   double sum = 0, sum_sil = 0, sum_sift = 0;
-  for (int n = 0; n < frames; ++n) {
-    const bool restart = W > 0 ? n % W == 0 : n == 0;
-    if (restart && W > 0) {
-      const auto& ref = *reference_;
-      const std::size_t a = std::size_t(n > 0 ? n - 1 : 0), b = std::size_t(n > 0 ? n : std::min(1, frames - 1));
-      mesh.V = anim.startFrom(poses_[std::size_t(n)], ref[std::size_t(n)], (ref[b] - ref[a]) / dt);
-    } else {
-      mesh.V = restart ? anim.start(poses_[0], options_.settle_frames) : anim.step(poses_[std::size_t(n)]);
-    }
-    const bool evaluated = !restart && n % stride == 0;
-    const bool lift = (n + 1) % stride == 0 && (W == 0 || (n + 1) % W != 0);  // the next frame is evaluated
-    if (!evaluated && !lift) {
-      prev_valid = false;
-      continue;
-    }
-    for (int k = 0; k < views; ++k) raster.render(mesh, cams[std::size_t(k)], cur[std::size_t(k)]);
-    if (evaluated) {
-      FrameTerms t;
-      for (int k = 0; k < views; ++k) {
-        const Camera& cam = cams[std::size_t(k)];
-        for (int v : rim_vertices(mesh, cam, cur[std::size_t(k)])) {
-          if (!in_region[std::size_t(v)]) continue;
-          const double d = obs_.boundaryDistance(n, k, cam.project(mesh.V.row(v).transpose()));
-          t.sil += std::min(d * d, cap2);
-          ++t.nsil;
-        }
-        if (!prev_valid) continue;
-        const RenderBuffers& b = prev[std::size_t(k)];
-        for (const FeaturePair& p : obs_.correspondences(n, k)) {
-          const int x = int(std::lround(p.from.x())), y = int(std::lround(p.from.y()));
-          if (x < 0 || y < 0 || x >= b.width || y >= b.height) continue;
-          const std::size_t at = std::size_t(y) * std::size_t(b.width) + std::size_t(x);
-          const int face = b.face[at];
-          if (face < 0 || !face_in[std::size_t(face)] || !detail::smooth_depth(b, x, y)) continue;
-          const double b1 = b.bary[2 * at], b2 = b.bary[2 * at + 1];
-          const Eigen::Vector3d X = detail::surface_point(mesh, face, Eigen::Vector3d(1 - b1 - b2, b1, b2));
-          if (!(cam.depth(X) > 0)) continue;
-          const Eigen::Vector2d q = cam.project(X);
-          if (!visible(cur[std::size_t(k)], q, cam.depth(X))) continue;  // occluded at frame n: the feature cannot be this point
-          const double d2 = (q - p.to.cast<double>()).squaredNorm();
-          t.sift += std::min(d2, cap2);
-          ++t.nsift;
-        }
-      }
-      const double es = t.nsil ? t.sil / double(t.nsil) : 0.0, ef = t.nsift ? t.sift / double(t.nsift) : 0.0;
-      sum += options_.alpha * es + options_.beta * ef;
-      sum_sil += es;
-      sum_sift += ef;
-      e.rim_samples += t.nsil;
-      e.feature_samples += t.nsift;
-      ++e.frames;
-    }
-    std::swap(prev, cur);
-    prev_valid = true;
+  for (const Partial& p : part) {
+    sum += p.sum;
+    sum_sil += p.sil;
+    sum_sift += p.sift;
+    e.rim_samples += p.rim_samples;
+    e.feature_samples += p.feature_samples;
+    e.frames += p.frames;
   }
   if (e.frames) {
     e.e_fit = sum / e.frames;
@@ -200,7 +268,8 @@ std::vector<ClothFitEnergy> ClothParameterEstimation::evaluate(int region, const
   checkRegion(region);
   std::vector<ClothFitEnergy> out(rhos.size());
   std::vector<std::string> errors(rhos.size());
-#pragma omp parallel for schedule(dynamic, 1)
+  // one sample: its windows run in parallel instead (a parallel region here would serialize them)
+#pragma omp parallel for schedule(dynamic, 1) if (rhos.size() > 1)
   for (long i = 0; i < long(rhos.size()); ++i) {
     try {
       out[std::size_t(i)] = evaluate(region, rhos[std::size_t(i)]);
