@@ -5,7 +5,7 @@
 // and by ours (start design + NLopt BOBYQA), in the same run. Prints a table: simulations, wall
 // time, E_fit, the estimate and its error against the truth; optionally a landscape slice.
 //
-//   bench_cloth_estimate [--clip FILE] [--frames N] [--size PX] [--views K] [--truth DN,DT,KB]
+//   bench_cloth_estimate [--clip FILE] [--frames N] [--bvh-step S (3)] [--size PX] [--views K] [--truth DN,DT,KB]
 //                        [--search thesis|ours|both|none] [--window W] [--stride S] [--landscape G] [--scan]
 //                        [--gt-model | --gt-weights] [--dir DIR] [--rings R --segments S]
 // --gt-model: estimate with the generating body model (its rigid weights, true clothness, the limb
@@ -39,7 +39,7 @@ int main(int argc, char** argv) {
   std::string clip_path = std::string(TBSP_SHARED_DATA_DIR) + "/capture/dopomoc__BVH/02_05.bvh";
   std::string search = "both", dir = (std::filesystem::temp_directory_path() / "tbsp_bench_cloth_estimate").string();
   bool gt_model = false, gt_weights = false, scan = false;
-  int frames = 100, size = 640, views = 8, landscape = 0, window = 10, rings = 20, segments = 48, stride = 1;
+  int frames = 100, bvh_step = 3, size = 640, views = 8, landscape = 0, window = 10, rings = 20, segments = 48, stride = 1;
   ClothMaterial truth{1.0, 10.0, 0.6};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -49,6 +49,7 @@ int main(int argc, char** argv) {
     };
     if (a == "--clip") clip_path = next();
     else if (a == "--frames") frames = std::atoi(next());
+    else if (a == "--bvh-step") bvh_step = std::atoi(next());
     else if (a == "--size") size = std::atoi(next());
     else if (a == "--views") views = std::atoi(next());
     else if (a == "--search") search = next();
@@ -78,6 +79,7 @@ int main(int argc, char** argv) {
   so.mannequin.skirt_rings = rings;
   so.mannequin.skirt_segments = segments;
   so.sequence.frames = frames;
+  so.sequence.bvh_step = bvh_step;
   so.sequence.material = truth;
   so.studio.cameras = views;
   so.studio.width = so.studio.height = size;
