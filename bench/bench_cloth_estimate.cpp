@@ -38,7 +38,9 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 int main(int argc, char** argv) {
   std::string clip_path = std::string(TBSP_SHARED_DATA_DIR) + "/capture/dopomoc__BVH/02_05.bvh";
   std::string search = "both", dir = (std::filesystem::temp_directory_path() / "tbsp_bench_cloth_estimate").string();
-  bool gt_model = false, gt_weights = false, scan = false;
+  bool gt_model = false, gt_weights = false, scan = false, print_samples = false;
+  int start_samples = 0, max_evals = 0;
+  std::string eval_points;  // "d_n,d_t,k_bend;..." evaluated and printed (diagnostics)
   int frames = 100, bvh_step = 3, size = 640, views = 8, landscape = 0, window = 10, rings = 20, segments = 48, stride = 1;
   ClothMaterial truth{1.0, 10.0, 0.6};
   for (int i = 1; i < argc; ++i) {
@@ -58,6 +60,10 @@ int main(int argc, char** argv) {
     else if (a == "--rings") rings = std::atoi(next());
     else if (a == "--segments") segments = std::atoi(next());
     else if (a == "--gt-model") gt_model = true;
+    else if (a == "--samples") print_samples = true;
+    else if (a == "--eval") eval_points = next();
+    else if (a == "--start") start_samples = std::atoi(next());
+    else if (a == "--max-evals") max_evals = std::atoi(next());
     else if (a == "--gt-weights") gt_weights = true;
     else if (a == "--scan") scan = true;
     else if (a == "--window") window = std::atoi(next());
@@ -105,6 +111,8 @@ int main(int argc, char** argv) {
   ClothEstimationOptions eo;
   eo.frame_stride = stride;
   eo.window = window;
+  if (start_samples > 0) eo.start_samples = start_samples;
+  if (max_evals > 0) eo.max_evaluations = max_evals;
   est.setReferenceSequence(gt.frames);
   est.setOptions(eo);
   std::printf("cloth vertices (δ ≥ 0.5): %d\n", est.clothVertices(0));
@@ -112,6 +120,20 @@ int main(int argc, char** argv) {
   const ClothFitEnergy et = est.evaluate(0, truth);
   std::printf("E_fit at the truth: %.3f (E_sil %.3f, E_sift %.4f; %ld rim, %ld features, %d frames) in %.2f s\n", et.e_fit, et.e_sil, et.e_sift,
               et.rim_samples, et.feature_samples, et.frames, seconds_since(t0));
+  if (!eval_points.empty()) {
+    std::vector<ClothMaterial> rhos;
+    std::size_t at = 0;
+    while (at < eval_points.size()) {
+      const std::size_t end = std::min(eval_points.find(';', at), eval_points.size());
+      ClothMaterial m;
+      if (std::sscanf(eval_points.substr(at, end - at).c_str(), "%lf,%lf,%lf", &m.d_n, &m.d_t, &m.k_bend) != 3) { std::fprintf(stderr, "--eval DN,DT,KB;...\n"); return 2; }
+      rhos.push_back(m);
+      at = end + 1;
+    }
+    const std::vector<ClothFitEnergy> es = est.evaluate(0, rhos);
+    for (std::size_t i = 0; i < rhos.size(); ++i)
+      std::printf("  eval %6.3f %6.2f %6.3f  E_fit %.3f\n", rhos[i].d_n, rhos[i].d_t, rhos[i].k_bend, es[i].e_fit);
+  }
   if (scan) {  // 1-D scans through the truth
     const double f[7] = {0.5, 0.7, 0.9, 1.0, 1.1, 1.3, 1.5};
     const double kb[7] = {-0.2, -0.1, -0.05, 0, 0.05, 0.1, 0.2};
@@ -173,6 +195,9 @@ int main(int argc, char** argv) {
     std::printf("| %s | %d | %.1f | %.3f | %.3f | %.2f | %.3f | %+.1f %% | %+.1f %% | %+.3f |\n", s, g.simulations, g.seconds, g.energy.e_fit, g.rho.d_n,
                 g.rho.d_t, g.rho.k_bend, 100 * (g.rho.d_n - truth.d_n) / truth.d_n, 100 * (g.rho.d_t - truth.d_t) / truth.d_t,
                 g.rho.k_bend - truth.k_bend);
+    if (print_samples)
+      for (const ClothSample& c : r.samples)
+        std::printf("  sample %6.3f %6.2f %6.3f  E_fit %.3f\n", c.rho.d_n, c.rho.d_t, c.rho.k_bend, c.energy.e_fit);
     std::fflush(stdout);
   }
   return 0;

@@ -99,3 +99,31 @@ TEST(Camera, InvalidParametersGiveClearErrors) {
   P(2, 2) = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(Camera::fromProjection("nan", 10, 10, P), InvalidInput);
 }
+
+// resized(s): a point's pixel follows u' = s_x (u + 0.5) − 0.5 with s_x = w'/w (cv::resize's
+// pixel-centre convention), with distortion; cropped(x, y): the pixel shifts by (−x, −y).
+TEST(Camera, ResizedAndCroppedCamerasMapPixelsAnalytically) {
+  Distortion dist;
+  dist.k1 = -0.21; dist.k2 = 0.05; dist.p1 = 0.001;
+  const Camera c = example_camera(dist);
+  const Camera half = c.resized(0.5), odd = c.resized(0.3);
+  EXPECT_EQ(half.width(), 502);
+  EXPECT_EQ(odd.width(), 301);  // lround(301.2)
+  const double sx = 301.0 / 1004.0;
+  const Camera crop = c.cropped(200, -30, 400, 300);
+  EXPECT_EQ(crop.width(), 400);
+  EXPECT_EQ(crop.height(), 300);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-0.5, 0.5);
+  for (int i = 0; i < 100; ++i) {
+    const Eigen::Vector3d X(u(rng), u(rng), u(rng));
+    const Eigen::Vector2d p = c.project(X);
+    EXPECT_LT((half.project(X) - (0.5 * (p.array() + 0.5) - 0.5).matrix()).norm(), 1e-9);
+    EXPECT_NEAR(odd.project(X).x(), sx * (p.x() + 0.5) - 0.5, 1e-9);
+    EXPECT_LT((crop.project(X) - (p - Eigen::Vector2d(200, -30))).norm(), 1e-9);
+    EXPECT_LT((crop.backProject(crop.project(X), crop.depth(X)) - X).norm(), 1e-9);
+  }
+  EXPECT_THROW(c.resized(0), InvalidInput);
+  EXPECT_THROW(c.resized(std::nan("")), InvalidInput);
+  EXPECT_THROW(c.cropped(0, 0, 0, 10), InvalidInput);
+}

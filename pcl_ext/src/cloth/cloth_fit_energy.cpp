@@ -123,10 +123,7 @@ Camera crop_to_mesh(const Camera& cam, const Eigen::MatrixX3d& V, Eigen::Vector2
   const int a = std::clamp(int(std::floor(x0)) - 2, 0, W - 1), b = std::clamp(int(std::ceil(x1)) + 2, 0, W - 1);
   const int c = std::clamp(int(std::floor(y0)) - 2, 0, H - 1), d = std::clamp(int(std::ceil(y1)) + 2, 0, H - 1);
   offset = Eigen::Vector2i(a, c);
-  Eigen::Matrix3d K = cam.K();
-  K(0, 2) -= a;
-  K(1, 2) -= c;
-  return Camera(cam.name(), b - a + 1, d - c + 1, K, cam.R(), cam.t(), cam.distortion());
+  return cam.cropped(a, c, b - a + 1, d - c + 1);
 }
 
 }  // namespace

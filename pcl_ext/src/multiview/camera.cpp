@@ -1,5 +1,6 @@
 #include "tbsp/multiview/camera.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -146,6 +147,30 @@ Ray Camera::ray(const Eigen::Vector2d& pixel) const {
 }
 
 double Camera::horizontalFov() const { return 2.0 * std::atan(0.5 * width_ / K_(0, 0)); }
+
+Camera Camera::resized(double s) const {
+  if (!(s > 0) || !std::isfinite(s))
+    throw InvalidInput("[tbsp::Camera::resized] camera '" + name_ + "': scale " + std::to_string(s) + " is not positive; pass a factor > 0");
+  const int w = std::max(1, static_cast<int>(std::lround(width_ * s))), h = std::max(1, static_cast<int>(std::lround(height_ * s)));
+  const double sx = static_cast<double>(w) / width_, sy = static_cast<double>(h) / height_;
+  Eigen::Matrix3d K = K_;
+  K.row(0) *= sx;
+  K.row(1) *= sy;
+  K(0, 2) += 0.5 * sx - 0.5;  // pixel centres at integers
+  K(1, 2) += 0.5 * sy - 0.5;
+  K(2, 2) = 1;
+  return Camera(name_, w, h, K, R_, t_, dist_);
+}
+
+Camera Camera::cropped(int x, int y, int width, int height) const {
+  if (width <= 0 || height <= 0)
+    throw InvalidInput("[tbsp::Camera::cropped] camera '" + name_ + "': crop " + std::to_string(width) + "x" + std::to_string(height) +
+                       " is empty; pass a positive width and height");
+  Eigen::Matrix3d K = K_;
+  K(0, 2) -= x;
+  K(1, 2) -= y;
+  return Camera(name_, width, height, K, R_, t_, dist_);
+}
 
 Camera Camera::lookAt(std::string name, int width, int height, double hfov, const Eigen::Vector3d& eye,
                       const Eigen::Vector3d& target, const Eigen::Vector3d& up) {

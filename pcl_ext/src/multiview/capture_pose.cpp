@@ -134,16 +134,6 @@ HandleSolveResult solve_handles(const Eigen::MatrixXd& R, const Eigen::MatrixXd&
   return res;
 }
 
-Camera scaled_camera(const Camera& c, double s) {
-  Eigen::Matrix3d K = c.K();
-  K.row(0) *= s;
-  K.row(1) *= s;
-  K(0, 2) += 0.5 * s - 0.5;  // pixel centres at integers: x' = s (x + 0.5) - 0.5
-  K(1, 2) += 0.5 * s - 0.5;
-  const int w = std::max(1, int(std::lround(c.width() * s))), h = std::max(1, int(std::lround(c.height() * s)));
-  return Camera(c.name(), w, h, K, c.R(), c.t(), c.distortion());
-}
-
 namespace {
 
 struct Problem {

@@ -81,7 +81,4 @@ struct HandleOptimization {
 int optimize_handles(TetDeformer& deformer, const std::vector<int>& key, const std::vector<Eigen::Vector3d>& targets,
                      const HandleOptimization& o, double& overlap_before, double& overlap_after);
 
-/// Camera whose images are `scale` times the size (pixel centres at integers kept consistent).
-Camera scaled_camera(const Camera& c, double scale);
-
 }  // namespace tbsp::detail

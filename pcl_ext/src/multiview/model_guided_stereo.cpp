@@ -50,19 +50,6 @@ void ModelGuidedStereo::setInputFrame(std::vector<Camera> cameras, std::vector<c
 
 namespace {
 
-// The camera of an image resized by `s` (pixel centres: u' = s (u + 0.5) - 0.5).
-Camera scaled_camera(const Camera& c, double s) {
-  const int w = std::max(1, static_cast<int>(std::lround(c.width() * s))), h = std::max(1, static_cast<int>(std::lround(c.height() * s)));
-  const double sx = static_cast<double>(w) / c.width(), sy = static_cast<double>(h) / c.height();
-  Eigen::Matrix3d K = c.K();
-  K.row(0) *= sx;
-  K.row(1) *= sy;
-  K(0, 2) += 0.5 * sx - 0.5;
-  K(1, 2) += 0.5 * sy - 0.5;
-  K(2, 2) = 1;
-  return Camera(c.name(), w, h, K, c.R(), c.t(), c.distortion());
-}
-
 inline bool bilinear(const cv::Mat& g, const Eigen::Vector2d& p, float& out) {
   const double x = p.x(), y = p.y();
   if (!(x >= 0) || !(y >= 0) || x > g.cols - 1.001 || y > g.rows - 1.001) return false;
@@ -156,7 +143,7 @@ void ModelGuidedStereo::computeCloud(Eigen::MatrixX3d& points, Eigen::MatrixX3d&
   int covered_views = 0;
   for (int k = 0; k < n; ++k) {
     ViewData& v = views[k];
-    v.cam = scaled_camera(cameras_[k], o.image_scale);
+    v.cam = cameras_[k].resized(o.image_scale);
     cv::Mat g, small;
     if (images_[k].channels() == 3) cv::cvtColor(images_[k], g, cv::COLOR_BGR2GRAY);
     else g = images_[k];

@@ -390,7 +390,7 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
   auto optimize = [&]() {
     detail::HandleOptimization ho;
     for (int k = 0; k < n; ++k) {
-      ho.cameras.push_back(detail::scaled_camera(cameras_[std::size_t(k)], o.optimize_image_scale));
+      ho.cameras.push_back(cameras_[std::size_t(k)].resized(o.optimize_image_scale));
       cv::Mat s;
       cv::resize(sv[std::size_t(k)].mask, s, cv::Size(ho.cameras.back().width(), ho.cameras.back().height()), 0, 0, cv::INTER_AREA);
       ho.silhouettes.push_back(s >= 128);

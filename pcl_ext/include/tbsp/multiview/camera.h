@@ -89,6 +89,17 @@ public:
   /// Horizontal field of view in radians (from fx and the width).
   double horizontalFov() const;
 
+  /// The camera of this image resized by `scale` (> 0) to round(w·s) × round(h·s) pixels (at
+  /// least 1 × 1), as cv::resize makes it: pixel centres at integers, u' = s_x (u + 0.5) − 0.5
+  /// with s_x = w'/w (and s_y alike), so a rounded size stays exact. Distortion unchanged (it acts
+  /// on normalised coordinates). Throws tbsp::InvalidInput when scale is not positive and finite.
+  Camera resized(double scale) const;
+  /// The camera of the sub-image [x, x + width) × [y, y + height) of this one: the same projection
+  /// with the principal point shifted by (−x, −y), so a pixel p of this image is p − (x, y) in the
+  /// crop. The window may reach outside the image (pixels there simply see nothing). Throws
+  /// tbsp::InvalidInput when width or height is not positive.
+  Camera cropped(int x, int y, int width, int height) const;
+
   /// A camera at `eye` looking at `target` with `up` roughly up in the image (-y), focal length
   /// from the horizontal field of view, principal point at the image centre.
   static Camera lookAt(std::string name, int width, int height, double hfov_radians,
