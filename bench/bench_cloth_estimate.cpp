@@ -41,7 +41,7 @@ int main(int argc, char** argv) {
   bool gt_model = false, gt_weights = false, scan = false, print_samples = false;
   int start_samples = 0, max_evals = 0;
   std::string eval_points;  // "d_n,d_t,k_bend;..." evaluated and printed (diagnostics)
-  int frames = 100, bvh_step = 3, size = 640, views = 8, landscape = 0, window = 10, rings = 20, segments = 48, stride = 1;
+  int frames = 100, bvh_step = 3, size = 640, views = 8, landscape = 0, window = ClothEstimationOptions{}.window, rings = 20, segments = 48, stride = 1;
   ClothMaterial truth{1.0, 10.0, 0.6};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
