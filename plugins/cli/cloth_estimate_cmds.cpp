@@ -54,7 +54,7 @@ void add_estimate(CLI::App& cloth, EstimateArgs& a, CLI::App*& sub) {
   sub->add_option("--start-samples", a.o.start_samples, "ours: start design size (default 8)")->check(CLI::Range(1, 1000));
   sub->add_option("--grid", a.o.grid_k, "thesis: K grid samples per axis (default 4)")->check(CLI::Range(1, 10));
   sub->add_option("--greedy", a.o.greedy_samples, "thesis: greedy samples (default 192)")->check(CLI::NonNegativeNumber);
-  sub->add_option("--window", a.o.window, "frames per simulation window restarted from --reference (default 5; 0 = whole sequence)")
+  sub->add_option("--window", a.o.window, "frames per simulation window restarted from --reference (default 10; 0 = whole sequence)")
       ->check(CLI::Range(0, 10000));
   sub->add_option("--stride", a.o.frame_stride, "evaluate E_fit on every n-th frame (default 1)")->check(CLI::Range(1, 1000));
   sub->add_option("--settle", a.o.settle_frames, "frames the cloth settles in the first pose (window 0; default 40)")->check(CLI::NonNegativeNumber);

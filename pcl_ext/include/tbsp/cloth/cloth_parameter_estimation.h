@@ -13,7 +13,7 @@
 ///   frame n − 1 pixel lies on the region's simulated cloth is lifted to that surface point
 ///   (triangle + barycentrics), carried to frame n by the simulation and reprojected; mean of the
 ///   squared distances to the feature's measured position at n.
-/// Simulation: ModelAnimator; by default in windows of 5 frames restarted from the reference
+/// Simulation: ModelAnimator; by default in windows of 10 frames restarted from the reference
 /// mesh sequence (see `window`: our change against chaos), or the whole sequence (the thesis).
 /// Squared distances are capped at `max_pixel_error`² (our addition: one rim vertex next to a
 /// far-away boundary or one mismatched feature otherwise dominates a frame).
@@ -53,15 +53,16 @@ struct ClothEstimationOptions {
   double clothness_min = 0.5;    ///< a vertex belongs to a region's cloth when δ ≥ this, (0, 1]
   int frame_stride = 1;          ///< E is evaluated on every n-th frame (the simulation runs every frame), 1..1000; thesis 1
   /// Frames per simulation window, 0..10000. 0 = the thesis: one simulation of the whole sequence
-  /// from the settled first pose. > 0 (default 5): the simulation restarts every `window` frames
+  /// from the settled first pose. > 0 (default 10): the simulation restarts every `window` frames
   /// from the reference sequence's state (positions, velocities by finite differences; needs
   /// setReferenceSequence); a window's first frame is its restart state and is not scored.
   /// Cloth simulation is chaotic — changing d_t by 0.1 % moves a skirt by 1.3 cm on average after
   /// 50 frames — so whole-sequence E_fit is a noisy landscape whose minimum a search finds only by
-  /// chance. Windows of 10 frames still leave needles of ±5 % at k_bend steps of 0.005; windows of
-  /// 5 keep E_fit smooth to ±0.3 % with its minimum at the true k_bend, at the same simulation
-  /// cost (docs/dev/cloth_experiments.md).
-  int window = 5;
+  /// chance. Shorter windows are smoother but see less: 10 frames leave needles of ±5 % at k_bend
+  /// steps of 0.005 and keep the soft side of the k_bend valley; 5 frames are smooth to ±0.3 % but
+  /// lost that side on a 60-frame sequence (k_bend 0.07 for a true 0.6, against 0.49 with 10);
+  /// same simulation cost (docs/dev/cloth_experiments.md).
+  int window = 10;
   int settle_frames = 40;        ///< frames the cloth settles in the first pose, ≥ 0
   ClothMaterial lower{0.0, 0.0, 0.0};    ///< search box (thesis: d_n ∈ [0, 10], d_t ∈ [0, 50], k_bend ∈ [0, 1])
   ClothMaterial upper{10.0, 50.0, 1.0};
