@@ -39,7 +39,7 @@ int main(int argc, char** argv) {
   std::string clip_path = std::string(TBSP_SHARED_DATA_DIR) + "/capture/dopomoc__BVH/02_05.bvh";
   std::string search = "both", dir = (std::filesystem::temp_directory_path() / "tbsp_bench_cloth_estimate").string();
   bool gt_model = false, gt_weights = false, scan = false, print_samples = false;
-  int start_samples = 0, max_evals = 0;
+  int start_samples = 0, max_evals = 0, phases = 1;
   std::string eval_points;  // "d_n,d_t,k_bend;..." evaluated and printed (diagnostics)
   int frames = 100, bvh_step = 3, size = 640, views = 8, landscape = 0, window = ClothEstimationOptions{}.window, rings = 20, segments = 48, stride = 1;
   ClothMaterial truth{1.0, 10.0, 0.6};
@@ -61,6 +61,7 @@ int main(int argc, char** argv) {
     else if (a == "--segments") segments = std::atoi(next());
     else if (a == "--gt-model") gt_model = true;
     else if (a == "--samples") print_samples = true;
+    else if (a == "--phases") phases = std::atoi(next());
     else if (a == "--eval") eval_points = next();
     else if (a == "--start") start_samples = std::atoi(next());
     else if (a == "--max-evals") max_evals = std::atoi(next());
@@ -111,6 +112,7 @@ int main(int argc, char** argv) {
   ClothEstimationOptions eo;
   eo.frame_stride = stride;
   eo.window = window;
+  eo.window_phases = phases;
   if (start_samples > 0) eo.start_samples = start_samples;
   if (max_evals > 0) eo.max_evaluations = max_evals;
   est.setReferenceSequence(gt.frames);

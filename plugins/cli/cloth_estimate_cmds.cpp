@@ -56,6 +56,9 @@ void add_estimate(CLI::App& cloth, EstimateArgs& a, CLI::App*& sub) {
   sub->add_option("--greedy", a.o.greedy_samples, "thesis: greedy samples (default 192)")->check(CLI::NonNegativeNumber);
   sub->add_option("--window", a.o.window, "frames per simulation window restarted from --reference (default 10; 0 = whole sequence)")
       ->check(CLI::Range(0, 10000));
+  sub->add_option("--window-phases", a.o.window_phases,
+                  "restart phases: the window grid laid this many times, shifted, E_fit averaged over all (default 1; costs this many times the simulation)")
+      ->check(CLI::Range(1, 10000));
   sub->add_option("--stride", a.o.frame_stride, "evaluate E_fit on every n-th frame (default 1)")->check(CLI::Range(1, 1000));
   sub->add_option("--settle", a.o.settle_frames, "frames the cloth settles in the first pose (window 0; default 40)")->check(CLI::NonNegativeNumber);
   sub->add_option("--seed", a.o.seed, "random seed of the searches (default 1)");
@@ -209,6 +212,7 @@ int cmd_estimate(EstimateArgs a) {
   rep["views"] = obs.numViews();
   rep["search"] = a.search;
   rep["window"] = a.o.window;
+  rep["window_phases"] = a.o.window_phases;
   rep["observations"] = {{"boundary_pixels", obs.numBoundaryPixels()}, {"correspondences", obs.numCorrespondences()}, {"megabytes", obs.memoryBytes() / 1e6}};
   rep["simulations"] = r.simulations;
   rep["seconds"] = r.seconds;

@@ -158,6 +158,11 @@ TEST(ClothParameterEstimation, BadInputsAreClearErrors) {
   o = {};
   o.upper.k_bend = 2;
   EXPECT_THROW(est.setOptions(o), InvalidInput);
+  o = {};
+  o.window_phases = 0;
+  EXPECT_THROW(est.setOptions(o), InvalidInput);
+  o.window_phases = o.window + 1;  // more phases than frames in a window
+  EXPECT_THROW(est.setOptions(o), InvalidInput);
   EXPECT_THROW(est.evaluate(1, truth), InvalidInput);  // no region 1
 }
 
@@ -188,4 +193,27 @@ TEST(ClothParameterEstimation, TrueBendingStiffnessIsNotWorseThanSofterAndBetter
   EXPECT_LT(1.15 * e[1].e_fit, e[2].e_fit);
   const ClothFitEnergy again = est.evaluate(0, rhos[1]);  // serial (the batch ran one sample per thread)
   EXPECT_EQ(again.e_fit, e[1].e_fit);
+}
+
+// Restart phases: with window 10 and 2 phases on 24 frames the grids are [0,10) [10,20) [20,24)
+// and [0,5) [5,15) [15,24); a window's first frame is not scored, so 9 + 9 + 3 and 4 + 9 + 8
+// frames: 42 with both phases against 21 with one, and the averaged E_fit is near the one-phase value.
+TEST(ClothParameterEstimation, RestartPhasesScoreEveryShiftedWindow) {
+  const ClothMaterial truth{1.0, 10.0, 0.6};
+  TBSP_REQUIRE_FILE(std::string(TBSP_SHARED_DATA_DIR) + "/capture/dopomoc__BVH/02_05.bvh");
+  const SmallGt* g = small_gt(truth);
+  ASSERT_NE(g, nullptr);
+  ASSERT_EQ(g->gt.frames.size(), 24u);
+  const AnimatableModel model = synth::generating_model(g->gt.mannequin, g->gt.skeleton, ClothMaterial{}, g->gt.model.settings);
+  ClothParameterEstimation est(model, g->gt.poses, *g->obs);
+  est.setReferenceSequence(g->gt.frames);
+  const ClothFitEnergy one = est.evaluate(0, truth);
+  ClothEstimationOptions o;
+  o.window_phases = 2;
+  est.setOptions(o);
+  const ClothFitEnergy two = est.evaluate(0, truth);
+  EXPECT_EQ(one.frames, 21);
+  EXPECT_EQ(two.frames, 42);
+  EXPECT_GT(two.rim_samples, one.rim_samples);
+  EXPECT_NEAR(two.e_fit, one.e_fit, 0.25 * one.e_fit);
 }

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "../multiview/capture_features.h"
@@ -32,6 +33,7 @@ bool ClothEstimationOptions::isValid(std::string* why) const {
   if (max_evaluations < start_samples) return fail("max_evaluations must be ≥ start_samples");
   if (!(tolerance > 0) || !std::isfinite(tolerance)) return fail("tolerance must be positive");
   if (window < 0 || window > 10000) return fail("window must be in 0..10000 (0 = the whole sequence)");
+  if (window_phases < 1 || window_phases > std::max(window, 1)) return fail("window_phases must be in 1..max(window, 1)");
   return true;
 }
 
@@ -230,13 +232,26 @@ ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMateria
   // With a window the windows are independent simulations: run in parallel (when this is not
   // already one of several samples evaluated in parallel), summed in window order, so the result
   // does not depend on the thread count.
-  const int nwin = W > 0 ? (frames + W - 1) / W : 1;
+  // Windows [n0, n1): with P phases the window grid is laid P times, shifted by W·p/P frames (the
+  // first window of a shifted grid is shorter), and every scored frame of every phase is averaged.
+  std::vector<std::pair<int, int>> spans;
+  const int P = W > 0 ? options_.window_phases : 1;
+  for (int p = 0; p < P; ++p) {
+    if (W <= 0) {
+      spans.push_back({0, frames});
+      break;
+    }
+    const int shift = W * p / P;
+    if (shift > 0) spans.push_back({0, std::min(frames, shift)});
+    for (int n0 = shift; n0 < frames; n0 += W) spans.push_back({n0, std::min(frames, n0 + W)});
+  }
+  const int nwin = int(spans.size());
   std::vector<Partial> part(static_cast<std::size_t>(nwin));
   std::vector<std::string> errors(static_cast<std::size_t>(nwin));
 #pragma omp parallel for schedule(dynamic, 1) if (nwin > 1)
   for (int w = 0; w < nwin; ++w) {
     try {
-      run(W > 0 ? w * W : 0, W > 0 ? std::min(frames, (w + 1) * W) : frames, part[std::size_t(w)]);
+      run(spans[std::size_t(w)].first, spans[std::size_t(w)].second, part[std::size_t(w)]);
     } catch (const std::exception& ex) {
       errors[std::size_t(w)] = ex.what();
     }

@@ -64,6 +64,10 @@ struct ClothEstimationOptions {
   /// lost that side on a 60-frame sequence (k_bend 0.07 for a true 0.6, against 0.49 with 10);
   /// same simulation cost (docs/dev/cloth_experiments.md).
   int window = 10;
+  /// Restart phases, 1..max(window, 1) (default 1): the window grid is laid this many times,
+  /// shifted by window·p/phases frames, and E_fit averages every scored frame of every phase, which
+  /// averages the chaotic part of E_fit at phases × the simulation cost.
+  int window_phases = 1;
   int settle_frames = 40;        ///< frames the cloth settles in the first pose, ≥ 0
   ClothMaterial lower{0.0, 0.0, 0.0};    ///< search box (thesis: d_n ∈ [0, 10], d_t ∈ [0, 50], k_bend ∈ [0, 1])
   ClothMaterial upper{10.0, 50.0, 1.0};
