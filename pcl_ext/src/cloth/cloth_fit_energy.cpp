@@ -235,12 +235,8 @@ ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMateria
   // Windows [n0, n1): with P phases the window grid is laid P times, shifted by W·p/P frames (the
   // first window of a shifted grid is shorter), and every scored frame of every phase is averaged.
   std::vector<std::pair<int, int>> spans;
-  const int P = W > 0 ? options_.window_phases : 1;
-  for (int p = 0; p < P; ++p) {
-    if (W <= 0) {
-      spans.push_back({0, frames});
-      break;
-    }
+  if (W <= 0) spans.push_back({0, frames});
+  for (int p = 0, P = options_.window_phases; W > 0 && p < P; ++p) {
     const int shift = W * p / P;
     if (shift > 0) spans.push_back({0, std::min(frames, shift)});
     for (int n0 = shift; n0 < frames; n0 += W) spans.push_back({n0, std::min(frames, n0 + W)});
