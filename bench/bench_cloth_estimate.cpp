@@ -38,7 +38,7 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 int main(int argc, char** argv) {
   std::string clip_path = std::string(TBSP_SHARED_DATA_DIR) + "/capture/dopomoc__BVH/02_05.bvh";
   std::string search = "both", dir = (std::filesystem::temp_directory_path() / "tbsp_bench_cloth_estimate").string();
-  bool gt_model = false, gt_weights = false, scan = false, print_samples = false;
+  bool gt_model = false, gt_weights = false, scan = false, print_samples = false, rescore = false;
   int start_samples = 0, max_evals = 0, phases = 1;
   std::string eval_points;  // "d_n,d_t,k_bend;..." evaluated and printed (diagnostics)
   int frames = 100, bvh_step = 3, size = 640, views = 8, landscape = 0, window = ClothEstimationOptions{}.window, rings = 20, segments = 48, stride = 1;
@@ -67,6 +67,7 @@ int main(int argc, char** argv) {
     else if (a == "--max-evals") max_evals = std::atoi(next());
     else if (a == "--gt-weights") gt_weights = true;
     else if (a == "--scan") scan = true;
+    else if (a == "--rescore") rescore = true;
     else if (a == "--window") window = std::atoi(next());
     else if (a == "--stride") stride = std::atoi(next());
     else if (a == "--truth") {
@@ -122,6 +123,24 @@ int main(int argc, char** argv) {
   const ClothFitEnergy et = est.evaluate(0, truth);
   std::printf("E_fit at the truth: %.3f (E_sil %.3f, E_sift %.4f; %ld rim, %ld features, %d frames) in %.2f s\n", et.e_fit, et.e_sil, et.e_sift,
               et.rim_samples, et.feature_samples, et.frames, seconds_since(t0));
+  // Held-out score (--rescore): a point on the window grid shifted by half a window, which the
+  // search never saw; from E with 2 phases (S0 + S1)/(F0 + F1) and E with 1 phase S0/F0.
+  auto rescore_point = [&](const char* what, const ClothMaterial& rho) {
+    if (window <= 1) return;
+    ClothEstimationOptions ro = eo;
+    ro.window_phases = 2;
+    est.setOptions(ro);
+    const ClothFitEnergy e2 = est.evaluate(0, rho);
+    ro.window_phases = 1;
+    est.setOptions(ro);
+    const ClothFitEnergy e1 = est.evaluate(0, rho);
+    est.setOptions(eo);
+    const double held = (e2.e_fit * e2.frames - e1.e_fit * e1.frames) / double(e2.frames - e1.frames);
+    std::printf("  rescore %s: E_fit on the search's grid %.3f, on the shifted grid (held out) %.3f, both grids %.3f\n", what, e1.e_fit, held,
+                e2.e_fit);
+    std::fflush(stdout);
+  };
+  if (rescore) rescore_point("truth", truth);
   if (!eval_points.empty()) {
     std::vector<ClothMaterial> rhos;
     std::size_t at = 0;
@@ -197,6 +216,7 @@ int main(int argc, char** argv) {
     std::printf("| %s | %d | %.1f | %.3f | %.3f | %.2f | %.3f | %+.1f %% | %+.1f %% | %+.3f |\n", s, g.simulations, g.seconds, g.energy.e_fit, g.rho.d_n,
                 g.rho.d_t, g.rho.k_bend, 100 * (g.rho.d_n - truth.d_n) / truth.d_n, 100 * (g.rho.d_t - truth.d_t) / truth.d_t,
                 g.rho.k_bend - truth.k_bend);
+    if (rescore) rescore_point(s, g.rho);
     if (print_samples)
       for (const ClothSample& c : r.samples)
         std::printf("  sample %6.3f %6.2f %6.3f  E_fit %.3f\n", c.rho.d_n, c.rho.d_t, c.rho.k_bend, c.energy.e_fit);

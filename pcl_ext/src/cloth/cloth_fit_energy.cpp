@@ -2,6 +2,7 @@
 // every view and compared with the observations. The search is in cloth_parameter_search.cpp.
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <limits>
 #include <string>
 #include <utility>
@@ -94,6 +95,23 @@ void ClothParameterEstimation::checkRegion(int region) const {
 }
 
 namespace {
+
+// f(i) for i in [0, n), in parallel when n > 1; an exception of any item is rethrown after the
+// loop (the one of the lowest index, with its type: a cancel stays a cancel).
+template <class F>
+void parallel_for_rethrow(long n, F&& f) {
+  std::vector<std::exception_ptr> err(static_cast<std::size_t>(std::max(n, 0L)));
+#pragma omp parallel for schedule(dynamic, 1) if (n > 1)
+  for (long i = 0; i < n; ++i) {
+    try {
+      f(i);
+    } catch (...) {
+      err[std::size_t(i)] = std::current_exception();
+    }
+  }
+  for (const std::exception_ptr& e : err)
+    if (e) std::rethrow_exception(e);
+}
 
 struct FrameTerms {
   double sil = 0, sift = 0;
@@ -243,17 +261,7 @@ ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMateria
   }
   const int nwin = int(spans.size());
   std::vector<Partial> part(static_cast<std::size_t>(nwin));
-  std::vector<std::string> errors(static_cast<std::size_t>(nwin));
-#pragma omp parallel for schedule(dynamic, 1) if (nwin > 1)
-  for (int w = 0; w < nwin; ++w) {
-    try {
-      run(spans[std::size_t(w)].first, spans[std::size_t(w)].second, part[std::size_t(w)]);
-    } catch (const std::exception& ex) {
-      errors[std::size_t(w)] = ex.what();
-    }
-  }
-  for (const std::string& msg : errors)
-    if (!msg.empty()) throw InvalidInput(msg);
+  parallel_for_rethrow(nwin, [&](long w) { run(spans[std::size_t(w)].first, spans[std::size_t(w)].second, part[std::size_t(w)]); });
   ClothFitEnergy e;
   double sum = 0, sum_sil = 0, sum_sift = 0;
   for (const Partial& p : part) {
@@ -275,18 +283,8 @@ ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMateria
 std::vector<ClothFitEnergy> ClothParameterEstimation::evaluate(int region, const std::vector<ClothMaterial>& rhos) const {
   checkRegion(region);
   std::vector<ClothFitEnergy> out(rhos.size());
-  std::vector<std::string> errors(rhos.size());
   // one sample: its windows run in parallel instead (a parallel region here would serialize them)
-#pragma omp parallel for schedule(dynamic, 1) if (rhos.size() > 1)
-  for (long i = 0; i < long(rhos.size()); ++i) {
-    try {
-      out[std::size_t(i)] = evaluate(region, rhos[std::size_t(i)]);
-    } catch (const std::exception& ex) {
-      errors[std::size_t(i)] = ex.what();
-    }
-  }
-  for (const std::string& s : errors)
-    if (!s.empty()) throw InvalidInput(s);
+  parallel_for_rethrow(long(rhos.size()), [&](long i) { out[std::size_t(i)] = evaluate(region, rhos[std::size_t(i)]); });
   return out;
 }
 
