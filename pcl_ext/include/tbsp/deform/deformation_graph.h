@@ -110,6 +110,8 @@ class DeformationGraph {
     Factor& operator=(Factor&&) noexcept;
     ~Factor();
     std::unique_ptr<SparseCholesky> chol;
+    struct Pattern;                    // the system matrix, its values filled in place (solve())
+    std::unique_ptr<Pattern> pattern;
   } factor_;
 };
 
