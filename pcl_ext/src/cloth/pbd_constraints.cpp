@@ -167,8 +167,21 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
           }
     }
   }
-  for (const auto& f : found) self_pairs_.insert(self_pairs_.end(), f.begin(), f.end());
-  std::sort(self_pairs_.begin(), self_pairs_.end());
+  // sorted (first, second): a counting sort by the first vertex, then each vertex's few partners
+  // sorted (the same order as sorting the whole list, which took a tenth of a simulation)
+  std::vector<int> first_start(n + 1, 0);
+  for (const auto& f : found)
+    for (const auto& pr : f) ++first_start[std::size_t(pr.first) + 1];
+  for (std::size_t i = 0; i < n; ++i) first_start[i + 1] += first_start[i];
+  self_pairs_.resize(std::size_t(first_start[n]));
+  {
+    std::vector<int> fill(first_start.begin(), first_start.end() - 1);
+    for (const auto& f : found)
+      for (const auto& pr : f) self_pairs_[std::size_t(fill[std::size_t(pr.first)]++)] = pr;
+  }
+  for (std::size_t i = 0; i < n; ++i)
+    if (first_start[i + 1] - first_start[i] > 1)
+      std::sort(self_pairs_.begin() + first_start[i], self_pairs_.begin() + first_start[i + 1]);
 }
 
 // The projections below run inside the sweep's parallel region (substep): each `omp for` splits
