@@ -83,6 +83,37 @@ TEST(Rasterizer, BarycentricsArePerspectiveCorrect) {
   EXPECT_LT(worst, 2e-3);  // float barycentrics
 }
 
+TEST(Rasterizer, PixelBarycentricsEqualTheBarycentricBuffer) {
+  // a camera with lens distortion and a tilted view: the helper must project as the render does
+  const Camera look = Camera::lookAt("c", 320, 240, 1.2, {0.4, 0.3, 3}, {0, 0, 0}, {0, 1, 0});
+  Distortion dist;
+  dist.k1 = -0.12;
+  dist.k2 = 0.03;
+  dist.p1 = 0.001;
+  dist.p2 = -0.002;
+  const Camera cam("c", 320, 240, look.K(), look.R(), look.t(), dist);
+  const TriMesh sphere = make_icosphere(3, 1.0);
+  RenderBuffers b;
+  Rasterizer().render(sphere, cam, b);
+  int n = 0;
+  double worst = 0;
+  for (int y = 0; y < b.height; ++y)
+    for (int x = 0; x < b.width; ++x) {
+      const std::size_t i = std::size_t(y) * b.width + x;
+      if (b.face[i] < 0) continue;
+      const Eigen::Vector3d q = pixel_barycentrics(sphere, cam, b.face[i], x, y);
+      const double b1 = b.bary[2 * i], b2 = b.bary[2 * i + 1];
+      worst = std::max({worst, std::abs(q(1) - b1), std::abs(q(2) - b2), std::abs(q(0) - (1.0 - b1 - b2))});
+      ++n;
+    }
+  EXPECT_GT(n, 5000);
+  EXPECT_LE(worst, 1e-6);  // the same formula; at most the float rounding of b1, b2 apart
+  EXPECT_THROW(pixel_barycentrics(sphere, cam, -1, 10, 10), InvalidInput);
+  EXPECT_THROW(pixel_barycentrics(sphere, cam, int(sphere.F.rows()), 10, 10), InvalidInput);
+  const Camera behind = Camera::lookAt("b", 320, 240, 1.2, {0, 0, 3}, {0, 0, 6}, {0, 1, 0});  // looks away
+  EXPECT_THROW(pixel_barycentrics(sphere, behind, 0, 10, 10), InvalidInput);
+}
+
 TEST(Rasterizer, SharedEdgesLeaveNoGapsAndBackfacesCanBeCulled) {
   // A plane filling the whole view, finely triangulated with jitter: every pixel covered.
   TriMesh grid = make_grid(40, 30, 4.0, 3.0, 0.15, 7);

@@ -6,6 +6,8 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "tbsp/core/error.h"
+
 namespace tbsp::detail {
 
 ViewFeatures detect_features(const cv::Mat& image, const cv::Mat& silhouette, int max_features) {
@@ -40,6 +42,8 @@ bool smooth_depth(const RenderBuffers& b, int x, int y) {
 
 LiftedFeatures lift_features(const ViewFeatures& f, const RenderBuffers& b, const std::vector<FeatureMatch>& inherit, const TriMesh* mesh,
                              const Camera* cam, double inherit_px) {
+  if (b.bary.empty() && !(mesh && cam))
+    throw InvalidInput("[tbsp::detail::lift_features] buffers rendered without barycentrics need the mesh and the camera");
   LiftedFeatures out;
   std::vector<int> rows;
   std::vector<const FeatureMatch*> track(f.pixel.size(), nullptr);
@@ -56,10 +60,13 @@ LiftedFeatures lift_features(const ViewFeatures& f, const RenderBuffers& b, cons
     if (t && (cam->project(surface_point(*mesh, t->face, t->bary)) - f.pixel[i]).norm() <= inherit_px) {
       out.face.push_back(t->face);  // the track keeps its surface point
       out.bary.push_back(t->bary);
-    } else {
+    } else if (!b.bary.empty()) {
       const float b1 = b.bary[2 * at(x, y)], b2 = b.bary[2 * at(x, y) + 1];
       out.face.push_back(face);
       out.bary.emplace_back(1.0 - b1 - b2, b1, b2);
+    } else {  // rendered without barycentrics: the same values for this pixel only
+      out.face.push_back(face);
+      out.bary.push_back(pixel_barycentrics(*mesh, *cam, face, x, y));
     }
     rows.push_back(static_cast<int>(i));
   }

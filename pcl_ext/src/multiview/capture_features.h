@@ -42,7 +42,9 @@ struct LiftedFeatures {
 /// `inherit` (optional, may be empty): matches of this view's keypoints to earlier lifted ones;
 /// such a keypoint keeps the surface point it was first lifted to (a feature track keeps its
 /// identity, so the identification does not drift with the mesh) when that point still projects
-/// within `inherit_px` of it on `mesh`; otherwise it is lifted afresh.
+/// within `inherit_px` of it on `mesh`; otherwise it is lifted afresh. Barycentrics come from the
+/// buffers, or, when they were rendered without (8 bytes per pixel saved), from
+/// pixel_barycentrics() at the keypoint's pixel (the same values; `mesh` and `cam` then required).
 LiftedFeatures lift_features(const ViewFeatures& f, const RenderBuffers& buffers, const std::vector<FeatureMatch>& inherit = {},
                              const TriMesh* mesh = nullptr, const Camera* cam = nullptr, double inherit_px = 2.0);
 

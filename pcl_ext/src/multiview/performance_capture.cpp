@@ -504,7 +504,9 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
   model.V = I.transfer.apply(I.X);
   model.F = template_.F;
   if (o.features) {
-    const Rasterizer fine;  // barycentrics on
+    // face ids and depth only: lift_features computes the barycentrics at the keypoints' pixels
+    // (the same values as a barycentric buffer, without its 8 bytes per pixel in every view)
+    const Rasterizer fine(ro);
     std::vector<RenderBuffers> fb;
     // On the tracking model itself (the transferred control mesh, before refinement): the next
     // frame's constraints move points of that model, so its surface points must be identified on it.

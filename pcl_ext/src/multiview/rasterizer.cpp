@@ -173,6 +173,37 @@ void Rasterizer::renderChecked(const TriMesh& mesh, const Camera& cam, RenderBuf
   }
 }
 
+Eigen::Vector3d pixel_barycentrics(const TriMesh& mesh, const Camera& cam, int face, int x, int y) {
+  if (face < 0 || face >= mesh.F.rows())
+    throw InvalidInput("[tbsp::pixel_barycentrics] face " + std::to_string(face) + " is outside the mesh's " +
+                       std::to_string(mesh.F.rows()) + " faces");
+  double px[3], py[3], iz[3];
+  for (int k = 0; k < 3; ++k) {
+    const int v = mesh.F(face, k);
+    if (v < 0 || v >= mesh.V.rows())
+      throw InvalidInput("[tbsp::pixel_barycentrics] face " + std::to_string(face) + " references vertex " + std::to_string(v) +
+                         " of " + std::to_string(mesh.V.rows()));
+    const Eigen::Vector3d X = mesh.V.row(v).transpose();
+    const double z = cam.depth(X);
+    if (!(z > 0))
+      throw InvalidInput("[tbsp::pixel_barycentrics] vertex " + std::to_string(v) + " of face " + std::to_string(face) +
+                         " is not in front of the camera: the face is never rendered");
+    const Eigen::Vector2d s = cam.project(X);  // as project_vertices
+    px[k] = s.x();
+    py[k] = s.y();
+    iz[k] = 1.0 / z;
+  }
+  // as the barycentric pass of renderChecked
+  const double area = edge(px[0], py[0], px[1], py[1], px[2], py[2]);
+  const double l0 = edge(px[1], py[1], px[2], py[2], x, y) / area;
+  const double l1 = edge(px[2], py[2], px[0], py[0], x, y) / area;
+  const double l2 = 1.0 - l0 - l1;
+  const double q0 = l0 * iz[0], q1 = l1 * iz[1], q2 = l2 * iz[2];
+  const double sum = q0 + q1 + q2;
+  const float b1 = static_cast<float>(q1 / sum), b2 = static_cast<float>(q2 / sum);
+  return Eigen::Vector3d(1.0 - b1 - b2, b1, b2);
+}
+
 void Rasterizer::renderViews(const TriMesh& mesh, const std::vector<Camera>& cameras, std::vector<RenderBuffers>& out) const {
   check_mesh(mesh, "Rasterizer::renderViews");
   out.resize(cameras.size());

@@ -68,6 +68,15 @@ private:
   RasterOptions options_;
 };
 
+/// Perspective-correct barycentrics (b0, b1, b2) of triangle `face` at the centre of pixel (x, y)
+/// of `camera`: what a render with `RasterOptions::barycentrics` stores there when that triangle
+/// is the visible one (the same projection and formula, b1 and b2 rounded to float as stored,
+/// b0 = 1 − b1 − b2). For callers that need them at a few pixels (keypoint lifting) and so can
+/// render without the buffer's 8 bytes per pixel. O(1).
+/// \throws InvalidInput for a face index outside the mesh or a vertex of it not in front of the
+/// camera (such a triangle is never rendered).
+Eigen::Vector3d pixel_barycentrics(const TriMesh& mesh, const Camera& camera, int face, int x, int y);
+
 /// Rim vertices of one view (§6.3.1, Fig. 6.2): vertices on the contour generator (incident to
 /// a front- and a back-facing triangle) that are visible and project within `tolerance_px`
 /// pixels of the outer border of the rendered silhouette (a covered pixel with an uncovered
