@@ -41,6 +41,19 @@ Projected project_vertices(const TriMesh& mesh, const Camera& cam, double near_p
 inline double edge(double ax, double ay, double bx, double by, double px, double py) {
   return (bx - ax) * (py - ay) - (by - ay) * (px - ax);
 }
+// Perspective-correct barycentrics (b1, b2) at pixel (x, y) of a triangle projected to
+// (px, py) with inverse depths iz: the barycentric pass of renderChecked and pixel_barycentrics.
+inline void perspective_barycentrics(const double px[3], const double py[3], const double iz[3], int x, int y, float& b1,
+                                     float& b2) {
+  const double area = edge(px[0], py[0], px[1], py[1], px[2], py[2]);
+  const double l0 = edge(px[1], py[1], px[2], py[2], x, y) / area;
+  const double l1 = edge(px[2], py[2], px[0], py[0], x, y) / area;
+  const double l2 = 1.0 - l0 - l1;
+  const double q0 = l0 * iz[0], q1 = l1 * iz[1], q2 = l2 * iz[2];
+  const double s = q0 + q1 + q2;
+  b1 = static_cast<float>(q1 / s);
+  b2 = static_cast<float>(q2 / s);
+}
 inline bool top_left(double ax, double ay, double bx, double by) {
   return (ay == by && bx > ax) || (by < ay);
 }
@@ -161,14 +174,8 @@ void Rasterizer::renderChecked(const TriMesh& mesh, const Camera& cam, RenderBuf
       const std::int32_t f = out.face[idx];
       if (f < 0) continue;
       const int i0 = mesh.F(f, 0), i1 = mesh.F(f, 1), i2 = mesh.F(f, 2);
-      const double area = edge(p.x[i0], p.y[i0], p.x[i1], p.y[i1], p.x[i2], p.y[i2]);
-      const double l0 = edge(p.x[i1], p.y[i1], p.x[i2], p.y[i2], x, y) / area;
-      const double l1 = edge(p.x[i2], p.y[i2], p.x[i0], p.y[i0], x, y) / area;
-      const double l2 = 1.0 - l0 - l1;
-      const double q0 = l0 * p.iz[i0], q1 = l1 * p.iz[i1], q2 = l2 * p.iz[i2];
-      const double s = q0 + q1 + q2;
-      out.bary[2 * idx] = static_cast<float>(q1 / s);
-      out.bary[2 * idx + 1] = static_cast<float>(q2 / s);
+      const double px[3] = {p.x[i0], p.x[i1], p.x[i2]}, py[3] = {p.y[i0], p.y[i1], p.y[i2]}, iz[3] = {p.iz[i0], p.iz[i1], p.iz[i2]};
+      perspective_barycentrics(px, py, iz, x, y, out.bary[2 * idx], out.bary[2 * idx + 1]);
     }
   }
 }
@@ -193,14 +200,8 @@ Eigen::Vector3d pixel_barycentrics(const TriMesh& mesh, const Camera& cam, int f
     py[k] = s.y();
     iz[k] = 1.0 / z;
   }
-  // as the barycentric pass of renderChecked
-  const double area = edge(px[0], py[0], px[1], py[1], px[2], py[2]);
-  const double l0 = edge(px[1], py[1], px[2], py[2], x, y) / area;
-  const double l1 = edge(px[2], py[2], px[0], py[0], x, y) / area;
-  const double l2 = 1.0 - l0 - l1;
-  const double q0 = l0 * iz[0], q1 = l1 * iz[1], q2 = l2 * iz[2];
-  const double sum = q0 + q1 + q2;
-  const float b1 = static_cast<float>(q1 / sum), b2 = static_cast<float>(q2 / sum);
+  float b1 = 0, b2 = 0;
+  perspective_barycentrics(px, py, iz, x, y, b1, b2);
   return Eigen::Vector3d(1.0 - b1 - b2, b1, b2);
 }
 
