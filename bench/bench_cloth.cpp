@@ -3,7 +3,8 @@
 // turns and sways (kinematic, δ = 0), two leg capsules swing inside it (proxies). Prints a table:
 // frames/s for each configuration and thread count, the largest edge strain and contacts.
 //
-//   bench_cloth [--frames N] [--rings R] [--segments S]
+//   bench_cloth [--frames N] [--rings R] [--segments S] [--only WORD] [--threads N]
+//   (--only: the configurations whose name contains WORD; --threads: that thread count only)
 #include <omp.h>
 
 #include <chrono>
@@ -104,13 +105,16 @@ Row run(const Skirt& s, const PbdSettings& st, int frames, int threads) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  int frames = 200, rings = 50, segments = 100;
+  int frames = 200, rings = 50, segments = 100, only_threads = 0;
+  std::string only;
   for (int i = 1; i + 1 < argc; i += 2) {
     if (!std::strcmp(argv[i], "--frames")) frames = std::atoi(argv[i + 1]);
     else if (!std::strcmp(argv[i], "--rings")) rings = std::atoi(argv[i + 1]);
     else if (!std::strcmp(argv[i], "--segments")) segments = std::atoi(argv[i + 1]);
+    else if (!std::strcmp(argv[i], "--only")) only = argv[i + 1];
+    else if (!std::strcmp(argv[i], "--threads")) only_threads = std::atoi(argv[i + 1]);
     else {
-      std::fprintf(stderr, "usage: bench_cloth [--frames N] [--rings R] [--segments S]\n");
+      std::fprintf(stderr, "usage: bench_cloth [--frames N] [--rings R] [--segments S] [--only WORD] [--threads N]\n");
       return 2;
     }
   }
@@ -132,11 +136,13 @@ int main(int argc, char** argv) {
                           Config{"16 sub-steps x 1 sweep, no self-collision", 1, 16, false},
                           Config{"thesis: 1 step x 16 sweeps, self-collision", 16, 1, true},
                           Config{"4 sub-steps x 4 sweeps, self-collision", 4, 4, true}}) {
+    if (!only.empty() && std::string(c.name).find(only) == std::string::npos) continue;
     PbdSettings st;
     st.iterations = c.iterations;
     st.substeps = c.substeps;
     st.self_collision = c.self;
     for (int threads : {1, 2}) {
+      if (only_threads > 0 && threads != only_threads) continue;
       const Row r = run(s, st, frames, threads);
       std::printf("%-44s %7d %10.1f %10.3f %10.3f %9d\n", c.name, threads, r.fps, r.strain, r.strain99, r.contacts);
     }

@@ -1,6 +1,6 @@
 // Template fitting (thesis ch. 5): results in the form of Table 5.1 and the speed benchmark
 // against PCL's Poisson reconstruction on the same cloud.
-//   ./build/bench/bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N]
+//   ./build/bench/bench_fit [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N]
 //                           [--propagation-weight W] [--rim-rejection R]
 // (--only: run just the rows whose model name contains WORD, e.g. armadillo; --seed / --markers:
 // of the ground-truth scenarios (default 1 / 20); --propagation-weight, --rim-rejection: of every
@@ -111,7 +111,7 @@ double median_of(std::vector<FitReport> r, double FitReport::*field) {
 
 int main(int argc, char** argv) {
   tbsp::reexec_with_huge_pages(argv);  // as the tbsp CLI (tbsp/core/huge_pages.h)
-  bool poisson = true;
+  bool poisson = true, detail_row = true;
   int repeat = 3;
   std::string only;
   unsigned seed = 1;
@@ -129,6 +129,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--no-poisson") poisson = false;
+    else if (a == "--no-detail-row") detail_row = false;
     else if (a == "--repeat" && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
     else if (a == "--only" && i + 1 < argc) only = argv[++i];
     else if (a == "--seed" && i + 1 < argc) seed = unsigned(std::atoi(argv[++i]));
@@ -155,7 +156,7 @@ int main(int argc, char** argv) {
     else if (a == "--coarse-angle" && i + 1 < argc) base.coarse_normal_angle_deg = std::atof(argv[++i]);
     else if (a == "--coarse-point-weight" && i + 1 < argc) base.coarse_point_weight = std::atof(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--repeat N] [--only WORD] [--seed N] [--markers N] "
+      std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N] "
                            "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--max-iterations N] "
                            "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--hole-axis 0|1|2] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
                            "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W]\n");
@@ -320,7 +321,7 @@ int main(int argc, char** argv) {
     std::snprintf(note, sizeof note, "clean Hausdorff %.3f%%; hole: surface %.3f%%; ROI incl. 10%% outliers", 100 * e.hausdorff_clean_rel,
                   100 * hole_error(s, fit.V, fit.F));
     row(c.name, s.markers.size(), t.V.rows(), s.P.rows(), r, note);
-    {
+    if (detail_row) {
       // the same with 4 detail rounds (FitParameters::detail_rounds; not a default: it costs
       // a factorization and a cloud -> mesh projection per round)
       FitParameters dp = base;
