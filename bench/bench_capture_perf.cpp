@@ -19,6 +19,8 @@
 //    --vlasic-turn: in-betweens that follow the body's turn (the best rotation between the two
 //    captured frames slerped, the rest linear in the rotating frame); linear ones squash the crane
 //    to 40-47 % of its volume where it turns by ~180 degrees (the table reports the smallest volume).
+//    --keyframes N [--keyframe-iou X]: PerformanceCaptureOptions::keyframe_interval / keyframe_iou
+//    for the --vlasic rows and the --capture-only row.
 // 5. --stereo FRAMES: model-guided stereo after the silhouette refinement (stereo_refine) on the
 //    performer with 1 cm folds (detail 2): the same sequence without and with it.
 // 6. --hull FRAMES: a template placed by eye (turned about the vertical, scaled, moved) tracked
@@ -92,7 +94,7 @@ void track_sequence(const SynthSequence& seq, PerformanceCapture& pc, OnFrame on
   }
 }
 
-void capture_rows(int frames, int size, const std::vector<int>& details) {
+void capture_rows(int frames, int size, const std::vector<int>& details, int keyframes = 0, double keyframe_iou = 0.98) {
   std::printf("\n## Performance capture (8 views of %dx%d, %d frames; medians per frame, seconds)\n\n", size, size, frames);
   std::printf("| template vertices | control tets | setup | SIFT | matching + lifting | pose | optimization | transfer | refinement | total per frame | "
               "worst mean vertex error (%% diag) | worst view IoU | error last / frame 5 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
@@ -101,6 +103,12 @@ void capture_rows(int frames, int size, const std::vector<int>& details) {
     const TriMesh& rest = seq.rest;
     const double diag = seq.diag;
     PerformanceCapture pc;
+    if (keyframes > 0) {
+      PerformanceCaptureOptions po;
+      po.keyframe_interval = keyframes;
+      po.keyframe_iou = keyframe_iou;
+      pc.setOptions(po);
+    }
     std::vector<double> err;
     std::vector<Eigen::MatrixX3d> tracked, truth;
     double worst_iou = 1;
@@ -343,12 +351,12 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--keyframes") && i + 1 < argc) keyframes = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--keyframe-iou") && i + 1 < argc) keyframe_iou = std::atof(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn] [--keyframes N [--keyframe-iou X]]] [--stereo FRAMES] [--hull FRAMES]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn]] [--keyframes N [--keyframe-iou X]] [--stereo FRAMES] [--hull FRAMES]\n");
       return 2;
     }
   }
   if (capture_only || vlasic > 0 || stereo > 0 || hull > 0) {
-    if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {capture_detail});
+    if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {capture_detail}, keyframes, keyframe_iou);
     if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_turn, keyframes, keyframe_iou);
     if (stereo > 0) stereo_rows(stereo, capture_size);
     if (hull > 0) hull_rows(hull, capture_size);

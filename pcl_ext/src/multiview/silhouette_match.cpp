@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <opencv2/imgproc.hpp>
 
@@ -60,6 +61,25 @@ inline bool inside(const cv::Mat& m, double x, double y) {
   if (xi < 0 || yi < 0 || xi >= m.cols || yi >= m.rows) return false;
   return m.at<std::uint8_t>(yi, xi) >= 128;
 }
+// Signed distance along `nrm` from `p` to the nearest inside -> outside crossing of `mask`
+// (searched both ways in half-pixel steps up to `search_px`; the crossing is the middle of the
+// step); NaN if none.
+double nearest_crossing(const cv::Mat& mask, const Eigen::Vector2d& p, const Eigen::Vector2d& nrm, double search_px) {
+  const double step = 0.5;
+  double best = std::numeric_limits<double>::quiet_NaN();
+  for (int dir : {1, -1})
+    for (double t = 0; t <= search_px; t += step) {
+      const double a = dir * t, c = a + dir * step;
+      const double lo = std::min(a, c), hi = std::max(a, c);
+      const Eigen::Vector2d qa = p + lo * nrm, qb = p + hi * nrm;
+      if (inside(mask, qa.x(), qa.y()) && !inside(mask, qb.x(), qb.y())) {
+        const double tc = 0.5 * (lo + hi);
+        if (!(std::abs(tc) >= std::abs(best))) best = tc;
+        break;
+      }
+    }
+  return best;
+}
 }  // namespace
 
 std::vector<RimMatch> match_rims(const TriMesh& mesh, const Camera& cam, const RenderBuffers& b, const SilhouetteView& input,
@@ -75,26 +95,23 @@ std::vector<RimMatch> match_rims(const TriMesh& mesh, const Camera& cam, const R
     Eigen::Vector2d g(rgx.at<float>(py, px), rgy.at<float>(py, px));
     if (!(g.norm() > 1e-3)) continue;
     const Eigen::Vector2d nrm = -g.normalized();  // outward normal of the rendered contour
-    // Nearest inside->outside crossing of the input silhouette along the normal.
-    const double step = 0.5;
-    double best_t = 1e9;
-    for (int dir : {1, -1})
-      for (double t = 0; t <= o.search_px; t += step) {
-        const double a = dir * t, c = a + dir * step;
-        const double lo = std::min(a, c), hi = std::max(a, c);
-        const Eigen::Vector2d qa = p + lo * nrm, qb = p + hi * nrm;
-        if (inside(input.mask, qa.x(), qa.y()) && !inside(input.mask, qb.x(), qb.y())) {
-          const double tc = 0.5 * (lo + hi);
-          if (std::abs(tc) < std::abs(best_t)) best_t = tc;
-          break;
-        }
-      }
-    if (std::abs(best_t) > o.max_distance_px) continue;
-    const Eigen::Vector2d u = p + best_t * nrm;
-    const int ux = std::clamp(static_cast<int>(std::lround(u.x())), 0, b.width - 1), uy = std::clamp(static_cast<int>(std::lround(u.y())), 0, b.height - 1);
+    // Nearest inside->outside crossing of the input silhouette along the normal, measured against
+    // the same crossing of the rendered silhouette: both masks are sampled at pixel centres, so
+    // their difference is the contour's displacement, while the vertex itself can project up
+    // to a pixel inside its own rendered contour (a polyhedral contour generator zigzags); the
+    // vertex alone against the input contour pushed an exact template outwards by 0.3 px.
+    const double t_in = nearest_crossing(input.mask, p, nrm, o.search_px);
+    if (!std::isfinite(t_in)) continue;
+    const double t_r = nearest_crossing(rmask, p, nrm, 2.0);
+    if (!std::isfinite(t_r)) continue;  // not on the rendered contour: a hidden turn of the contour generator
+    const double shift = t_in - t_r;
+    if (std::abs(shift) > o.max_distance_px) continue;
+    const Eigen::Vector2d c = p + t_in * nrm;  // the input contour point, for the orientation test
+    const int ux = std::clamp(static_cast<int>(std::lround(c.x())), 0, b.width - 1), uy = std::clamp(static_cast<int>(std::lround(c.y())), 0, b.height - 1);
     const Eigen::Vector2d gi(input.gx.at<float>(uy, ux), input.gy.at<float>(uy, ux));
     if (!(gi.norm() > 1e-3) || gi.normalized().dot(g.normalized()) < o.cos_max) continue;  // orientation test
-    out.push_back({v, u, std::abs(best_t), gi.normalized()});
+    const Eigen::Vector2d u = p + shift * nrm;
+    out.push_back({v, u, std::abs(shift), gi.normalized()});
   }
   return out;
 }
