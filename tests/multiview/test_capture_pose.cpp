@@ -1,11 +1,16 @@
 // The pose step of PerformanceCapture (internal: pcl_ext/src/multiview/capture_pose.h): the
-// normal equations assembled by BLAS rank-k updates against the textbook sum, and the handle
-// solve recovering a known handle move.
+// normal equations assembled by BLAS rank-k updates against the textbook sum, the handle solve
+// recovering a known handle move, and the rim matches its silhouette constraints come from.
 #include <gtest/gtest.h>
 
 #include <random>
 
+#include <opencv2/core.hpp>
+
 #include "capture_pose.h"
+#include "silhouette_match.h"
+#include "tbsp/mesh/primitives.h"
+#include "tbsp/multiview/rasterizer.h"
 
 using namespace tbsp;
 using namespace tbsp::detail;
@@ -89,4 +94,40 @@ TEST(CapturePose, SolveHandlesRecoversAKnownHandleMove) {
   EXPECT_LT((res.dh - dh).cwiseAbs().maxCoeff(), 1e-8);
   EXPECT_EQ(res.feature_inliers + res.rim_inliers, int(C.size()) - 8);
   EXPECT_LT(res.median_residual_px, 1e-8);
+}
+
+// Rim matching (internal: pcl_ext/src/multiview/silhouette_match.h): an exact mesh against its own
+// silhouette gets no offsets at all (the input contour is measured against the rendered contour,
+// not against the rim vertex, which can project inside it), and a mesh 3 % too large is pulled
+// in by about its excess projected radius.
+TEST(RimMatch, ExactMeshHasNoOffsetAndAScaledOneIsPulledBack) {
+  const TriMesh sphere = make_icosphere(4, 1.0);
+  Eigen::Matrix3d K;
+  K << 600, 0, 199.5, 0, 600, 199.5, 0, 0, 1;
+  const Camera cam("c", 400, 400, K, Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.03, -0.02, 5.0));
+  const Rasterizer raster;
+  const RenderBuffers truth = raster.renderViews(sphere, {cam})[0];
+  cv::Mat silhouette(truth.height, truth.width, CV_8U, const_cast<std::uint8_t*>(truth.mask.data()));
+  SilhouetteView view;
+  view.set(silhouette.clone());
+  const std::vector<RimMatch> exact = match_rims(sphere, cam, truth, view, RimMatchOptions{});
+  ASSERT_GT(exact.size(), 50u);
+  for (const RimMatch& m : exact) EXPECT_EQ(m.distance_px, 0.0) << "vertex " << m.vertex;
+
+  TriMesh larger = sphere;
+  larger.V *= 1.03;
+  const RenderBuffers b = raster.renderViews(larger, {cam})[0];
+  const std::vector<RimMatch> pulled = match_rims(larger, cam, b, view, RimMatchOptions{});
+  ASSERT_GT(pulled.size(), 50u);
+  // projected radius of a sphere of radius r at distance d: f r / sqrt(d² − r²)
+  auto radius_px = [](double r) { return 600 * r / std::sqrt(25.0 - r * r); };
+  const double excess = radius_px(1.03) - radius_px(1.0);  // 3.7 px
+  const Eigen::Vector2d centre = cam.project(Eigen::Vector3d::Zero());
+  double mean = 0;
+  for (const RimMatch& m : pulled) {
+    const double shift = (m.pixel - centre).norm() - (cam.project(larger.V.row(m.vertex).transpose()) - centre).norm();
+    mean += shift / double(pulled.size());
+    EXPECT_NEAR(shift, -excess, 1.5) << "vertex " << m.vertex;
+  }
+  EXPECT_NEAR(mean, -excess, 0.25);
 }
