@@ -84,18 +84,22 @@ void PbdClothSimulator::findProxyCandidates(const std::vector<RoundCone>& prev, 
   // moves less), less the larger radius, is within twice the thickness and twice the farthest
   // any vertex travels (the margins of the bounding-sphere test this replaces, which took in
   // most of a skirt around a leg: 19 % of a frame went to signed distances of far vertices).
-  std::vector<double> reach(next.size());
-  for (std::size_t k = 0; k < next.size(); ++k)
-    reach[k] = std::max((next[k].a - prev[k].a).norm(), (next[k].b - prev[k].b).norm()) +
-               std::max({next[k].ra, next[k].rb, prev[k].ra, prev[k].rb}) + 2 * settings_.thickness + 2 * travel;
+  const std::size_t np = next.size();
+  std::vector<double> reach2(np), l2(np);  // squared reach; squared axis length at the start
+  std::vector<Eigen::Vector3d> ab(np);     // axis at the start
+  for (std::size_t k = 0; k < np; ++k) {
+    const double reach = std::max((next[k].a - prev[k].a).norm(), (next[k].b - prev[k].b).norm()) +
+                         std::max({next[k].ra, next[k].rb, prev[k].ra, prev[k].rb}) + 2 * settings_.thickness + 2 * travel;
+    reach2[k] = reach * reach;
+    ab[k] = prev[k].b - prev[k].a;
+    l2[k] = ab[k].squaredNorm();
+  }
   for (std::size_t i = 0; i < n; ++i) {
     proxy_offsets_[i] = int(proxy_pairs_.size());
     if (inv_mass_[i] == 0) continue;
-    for (std::size_t k = 0; k < next.size(); ++k) {
-      const Eigen::Vector3d ab = prev[k].b - prev[k].a;
-      const double l2 = ab.squaredNorm();
-      const double t = l2 > 0 ? std::clamp((pos_[i] - prev[k].a).dot(ab) / l2, 0.0, 1.0) : 0.0;
-      if ((pos_[i] - (prev[k].a + t * ab)).squaredNorm() < reach[k] * reach[k]) proxy_pairs_.emplace_back(int(i), int(k));
+    for (std::size_t k = 0; k < np; ++k) {
+      const double t = l2[k] > 0 ? std::clamp((pos_[i] - prev[k].a).dot(ab[k]) / l2[k], 0.0, 1.0) : 0.0;
+      if ((pos_[i] - (prev[k].a + t * ab[k])).squaredNorm() < reach2[k]) proxy_pairs_.emplace_back(int(i), int(k));
     }
   }
   proxy_offsets_[n] = int(proxy_pairs_.size());
