@@ -19,8 +19,11 @@
 //    --vlasic-turn: in-betweens that follow the body's turn (the best rotation between the two
 //    captured frames slerped, the rest linear in the rotating frame); linear ones squash the crane
 //    to 40-47 % of its volume where it turns by ~180 degrees (the table reports the smallest volume).
-//    --keyframes N [--keyframe-iou X]: PerformanceCaptureOptions::keyframe_interval / keyframe_iou
-//    for the --vlasic rows and the --capture-only row.
+//    --keyframes N [--keyframe-iou X] [--pose-rounds N] [--smoothness X] [--refine N] [--handles N]
+//    [--tets N] [--anchor-weight X] [--reject-px X] [--deformer-iterations N]: those
+//    PerformanceCaptureOptions (keyframe_interval, keyframe_iou, pose_rounds, smoothness,
+//    refine_iterations, handles, tets, anchor_weight, reject_px, deformer_iterations) for the
+//    --vlasic rows and the --capture-only row; --vlasic-only samba|crane runs one sequence.
 // 5. --stereo FRAMES: model-guided stereo after the silhouette refinement (stereo_refine) on the
 //    performer with 1 cm folds (detail 2): the same sequence without and with it.
 // 6. --hull FRAMES: a template placed by eye (turned about the vertical, scaled, moved) tracked
@@ -94,7 +97,7 @@ void track_sequence(const SynthSequence& seq, PerformanceCapture& pc, OnFrame on
   }
 }
 
-void capture_rows(int frames, int size, const std::vector<int>& details, int keyframes = 0, double keyframe_iou = 0.98) {
+void capture_rows(int frames, int size, const std::vector<int>& details, const PerformanceCaptureOptions& po = {}) {
   std::printf("\n## Performance capture (8 views of %dx%d, %d frames; medians per frame, seconds)\n\n", size, size, frames);
   std::printf("| template vertices | control tets | setup | SIFT | matching + lifting | pose | optimization | transfer | refinement | total per frame | "
               "worst mean vertex error (%% diag) | worst view IoU | error last / frame 5 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
@@ -103,12 +106,7 @@ void capture_rows(int frames, int size, const std::vector<int>& details, int key
     const TriMesh& rest = seq.rest;
     const double diag = seq.diag;
     PerformanceCapture pc;
-    if (keyframes > 0) {
-      PerformanceCaptureOptions po;
-      po.keyframe_interval = keyframes;
-      po.keyframe_iou = keyframe_iou;
-      pc.setOptions(po);
-    }
+    pc.setOptions(po);
     std::vector<double> err;
     std::vector<Eigen::MatrixX3d> tracked, truth;
     double worst_iou = 1;
@@ -166,13 +164,14 @@ double mesh_volume(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
   return v;
 }
 
-void vlasic_rows(int steps, int size, bool follow_turn, int keyframes, double keyframe_iou) {
+void vlasic_rows(int steps, int size, bool follow_turn, const PerformanceCaptureOptions& po, const std::string& only) {
   const std::string base = std::string(TBSP_SHARED_DATA_DIR) + "/meshes/CraGL__Hyperspectral-Inverse-Skinning/models/";
   std::printf("\n## Performance capture of the Vlasic meshes (8 views of %dx%d, %d in-between frames per 50 captured frames, %s)\n\n", size, size,
               steps, follow_turn ? "in-betweens follow the body's turn" : "linear in-betweens");
   std::printf("| sequence | vertices | frames | smallest in-between volume (%% of its keyframe) | error at 0050 / 0100 / 0150 (%% diag) | view IoU min at 0050 / 0100 / 0150 | worst error, all frames | worst view IoU, all frames | error last / frame 5 | failed frames | s per frame |\n"
               "|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const char* seq : {"samba", "crane"}) {
+    if (!only.empty() && only != seq) continue;
     std::vector<TriMesh> key;
     for (const char* f : {"0000", "0050", "0100", "0150"}) key.push_back(read_mesh(base + seq + "/mesh_" + f + ".obj"));
     const int frames = 3 * steps + 1;
@@ -195,9 +194,6 @@ void vlasic_rows(int steps, int size, bool follow_turn, int keyframes, double ke
     const Studio st = read_studio(dir + "/studio.yaml");
     const double diag = (key[0].V.colwise().maxCoeff() - key[0].V.colwise().minCoeff()).norm();
     PerformanceCapture pc;
-    PerformanceCaptureOptions po;
-    po.keyframe_interval = keyframes;
-    po.keyframe_iou = keyframe_iou;
     pc.setOptions(po);
     pc.setCameras(st.cameraList());
     pc.setTemplate(key[0]);
@@ -335,9 +331,9 @@ void stereo_rows(int frames, int size) {
 int main(int argc, char** argv) {
   int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0, stereo = 0, hull = 0;
   bool capture_only = false, vlasic_turn = false;
+  std::string vlasic_only;  // samba or crane; empty = both
   int capture_detail = 1;
-  int keyframes = 0;
-  double keyframe_iou = 0.98;
+  PerformanceCaptureOptions po;  // defaults, unless a flag below changes them
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--repeats") && i + 1 < argc) repeats = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--capture-frames") && i + 1 < argc) capture_frames = std::max(0, std::atoi(argv[++i]));
@@ -348,16 +344,30 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--stereo") && i + 1 < argc) stereo = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--vlasic-turn")) vlasic_turn = true;
     else if (!std::strcmp(argv[i], "--hull") && i + 1 < argc) hull = std::max(0, std::atoi(argv[++i]));
-    else if (!std::strcmp(argv[i], "--keyframes") && i + 1 < argc) keyframes = std::max(0, std::atoi(argv[++i]));
-    else if (!std::strcmp(argv[i], "--keyframe-iou") && i + 1 < argc) keyframe_iou = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--keyframes") && i + 1 < argc) po.keyframe_interval = std::max(0, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--keyframe-iou") && i + 1 < argc) po.keyframe_iou = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--pose-rounds") && i + 1 < argc) po.pose_rounds = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--smoothness") && i + 1 < argc) po.smoothness = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--refine") && i + 1 < argc) po.refine_iterations = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--handles") && i + 1 < argc) po.handles = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--tets") && i + 1 < argc) po.tets = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--anchor-weight") && i + 1 < argc) po.anchor_weight = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--reject-px") && i + 1 < argc) po.reject_px = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--deformer-iterations") && i + 1 < argc) po.deformer_iterations = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--vlasic-only") && i + 1 < argc) vlasic_only = argv[++i];
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn]] [--keyframes N [--keyframe-iou X]] [--stereo FRAMES] [--hull FRAMES]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn]] [--keyframes N [--keyframe-iou X]] [--pose-rounds N] [--smoothness X] [--refine N] [--handles N] [--tets N] [--anchor-weight X] [--reject-px X] [--deformer-iterations N] [--vlasic-only samba|crane] [--stereo FRAMES] [--hull FRAMES]\n");
       return 2;
     }
   }
   if (capture_only || vlasic > 0 || stereo > 0 || hull > 0) {
-    if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {capture_detail}, keyframes, keyframe_iou);
-    if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_turn, keyframes, keyframe_iou);
+    std::string why;
+    if (!po.isValid(&why)) {
+      std::fprintf(stderr, "bench_capture_perf: %s\n", why.c_str());
+      return 2;
+    }
+    if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {capture_detail}, po);
+    if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_turn, po, vlasic_only);
     if (stereo > 0) stereo_rows(stereo, capture_size);
     if (hull > 0) hull_rows(hull, capture_size);
     return 0;

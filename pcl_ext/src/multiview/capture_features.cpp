@@ -60,13 +60,13 @@ LiftedFeatures lift_features(const ViewFeatures& f, const RenderBuffers& b, cons
     if (t && (cam->project(surface_point(*mesh, t->face, t->bary)) - f.pixel[i]).norm() <= inherit_px) {
       out.face.push_back(t->face);  // the track keeps its surface point
       out.bary.push_back(t->bary);
-    } else if (!b.bary.empty()) {
+    } else if (mesh && cam) {  // the surface point under the keypoint itself, not under its pixel's centre
+      out.face.push_back(face);
+      out.bary.push_back(point_barycentrics(*mesh, *cam, face, f.pixel[i]));
+    } else {
       const float b1 = b.bary[2 * at(x, y)], b2 = b.bary[2 * at(x, y) + 1];
       out.face.push_back(face);
       out.bary.emplace_back(1.0 - b1 - b2, b1, b2);
-    } else {  // rendered without barycentrics: the same values for this pixel only
-      out.face.push_back(face);
-      out.bary.push_back(pixel_barycentrics(*mesh, *cam, face, x, y));
     }
     rows.push_back(static_cast<int>(i));
   }

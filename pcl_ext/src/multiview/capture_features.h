@@ -42,9 +42,11 @@ struct LiftedFeatures {
 /// `inherit` (optional, may be empty): matches of this view's keypoints to earlier lifted ones;
 /// such a keypoint keeps the surface point it was first lifted to (a feature track keeps its
 /// identity, so the identification does not drift with the mesh) when that point still projects
-/// within `inherit_px` of it on `mesh`; otherwise it is lifted afresh. Barycentrics come from the
-/// buffers, or, when they were rendered without (8 bytes per pixel saved), from
-/// pixel_barycentrics() at the keypoint's pixel (the same values; `mesh` and `cam` then required).
+/// within `inherit_px` of it on `mesh`; otherwise it is lifted afresh. The visible triangle is the
+/// buffers' at the keypoint's pixel; with `mesh` and `cam` the barycentrics are those of the
+/// keypoint's exact sub-pixel position on that triangle (point_barycentrics; the buffers may then
+/// be rendered without barycentrics), otherwise the buffers' at the pixel centre (up to half a
+/// pixel off). Without `mesh` and `cam` the buffers must hold barycentrics.
 LiftedFeatures lift_features(const ViewFeatures& f, const RenderBuffers& buffers, const std::vector<FeatureMatch>& inherit = {},
                              const TriMesh* mesh = nullptr, const Camera* cam = nullptr, double inherit_px = 2.0);
 

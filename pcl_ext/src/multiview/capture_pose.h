@@ -41,7 +41,7 @@ Eigen::MatrixXd assemble_constraint_normals(const Eigen::MatrixXd& M, const std:
 struct HandleSolveOptions {
   double smoothness = 0.2;  ///< weight of the handle stiffness (per template edge, pixels²)
   double robust_px = 2.0;   ///< Huber scale
-  double reject_px = 8.0;   ///< outlier threshold after the first solve
+  double reject_px = 40.0;  ///< outlier threshold after the first solve (PerformanceCaptureOptions::reject_px)
   double prior = 1e-3;      ///< pull of every handle move to 0 (keeps handles without data where they are)
   int reweights = 2;        ///< robust re-solves after the first
 };

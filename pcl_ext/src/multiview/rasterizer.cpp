@@ -43,16 +43,16 @@ inline double edge(double ax, double ay, double bx, double by, double px, double
 }
 // Perspective-correct barycentrics (b1, b2) at pixel (x, y) of a triangle projected to
 // (px, py) with inverse depths iz: the barycentric pass of renderChecked and pixel_barycentrics.
-inline void perspective_barycentrics(const double px[3], const double py[3], const double iz[3], int x, int y, float& b1,
-                                     float& b2) {
+inline void perspective_barycentrics(const double px[3], const double py[3], const double iz[3], double x, double y, double& b1,
+                                     double& b2) {
   const double area = edge(px[0], py[0], px[1], py[1], px[2], py[2]);
   const double l0 = edge(px[1], py[1], px[2], py[2], x, y) / area;
   const double l1 = edge(px[2], py[2], px[0], py[0], x, y) / area;
   const double l2 = 1.0 - l0 - l1;
   const double q0 = l0 * iz[0], q1 = l1 * iz[1], q2 = l2 * iz[2];
   const double s = q0 + q1 + q2;
-  b1 = static_cast<float>(q1 / s);
-  b2 = static_cast<float>(q2 / s);
+  b1 = q1 / s;
+  b2 = q2 / s;
 }
 inline bool top_left(double ax, double ay, double bx, double by) {
   return (ay == by && bx > ax) || (by < ay);
@@ -175,33 +175,53 @@ void Rasterizer::renderChecked(const TriMesh& mesh, const Camera& cam, RenderBuf
       if (f < 0) continue;
       const int i0 = mesh.F(f, 0), i1 = mesh.F(f, 1), i2 = mesh.F(f, 2);
       const double px[3] = {p.x[i0], p.x[i1], p.x[i2]}, py[3] = {p.y[i0], p.y[i1], p.y[i2]}, iz[3] = {p.iz[i0], p.iz[i1], p.iz[i2]};
-      perspective_barycentrics(px, py, iz, x, y, out.bary[2 * idx], out.bary[2 * idx + 1]);
+      double b1 = 0, b2 = 0;
+      perspective_barycentrics(px, py, iz, x, y, b1, b2);
+      out.bary[2 * idx] = static_cast<float>(b1);
+      out.bary[2 * idx + 1] = static_cast<float>(b2);
     }
   }
 }
 
-Eigen::Vector3d pixel_barycentrics(const TriMesh& mesh, const Camera& cam, int face, int x, int y) {
+namespace {
+// The projected corners (px, py) and inverse depths of `face` in `cam`; throws what
+// pixel_barycentrics documents.
+void project_face(const TriMesh& mesh, const Camera& cam, int face, const char* who, double px[3], double py[3], double iz[3]) {
   if (face < 0 || face >= mesh.F.rows())
-    throw InvalidInput("[tbsp::pixel_barycentrics] face " + std::to_string(face) + " is outside the mesh's " +
+    throw InvalidInput(std::string("[tbsp::") + who + "] face " + std::to_string(face) + " is outside the mesh's " +
                        std::to_string(mesh.F.rows()) + " faces");
-  double px[3], py[3], iz[3];
   for (int k = 0; k < 3; ++k) {
     const int v = mesh.F(face, k);
     if (v < 0 || v >= mesh.V.rows())
-      throw InvalidInput("[tbsp::pixel_barycentrics] face " + std::to_string(face) + " references vertex " + std::to_string(v) +
+      throw InvalidInput(std::string("[tbsp::") + who + "] face " + std::to_string(face) + " references vertex " + std::to_string(v) +
                          " of " + std::to_string(mesh.V.rows()));
     const Eigen::Vector3d X = mesh.V.row(v).transpose();
     const double z = cam.depth(X);
     if (!(z > 0))
-      throw InvalidInput("[tbsp::pixel_barycentrics] vertex " + std::to_string(v) + " of face " + std::to_string(face) +
+      throw InvalidInput(std::string("[tbsp::") + who + "] vertex " + std::to_string(v) + " of face " + std::to_string(face) +
                          " is not in front of the camera: the face is never rendered");
     const Eigen::Vector2d s = cam.project(X);  // as project_vertices
     px[k] = s.x();
     py[k] = s.y();
     iz[k] = 1.0 / z;
   }
-  float b1 = 0, b2 = 0;
+}
+}  // namespace
+
+Eigen::Vector3d pixel_barycentrics(const TriMesh& mesh, const Camera& cam, int face, int x, int y) {
+  double px[3], py[3], iz[3];
+  project_face(mesh, cam, face, "pixel_barycentrics", px, py, iz);
+  double b1 = 0, b2 = 0;
   perspective_barycentrics(px, py, iz, x, y, b1, b2);
+  const float f1 = static_cast<float>(b1), f2 = static_cast<float>(b2);  // as the buffer stores them
+  return Eigen::Vector3d(1.0 - f1 - f2, f1, f2);
+}
+
+Eigen::Vector3d point_barycentrics(const TriMesh& mesh, const Camera& cam, int face, const Eigen::Vector2d& p) {
+  double px[3], py[3], iz[3];
+  project_face(mesh, cam, face, "point_barycentrics", px, py, iz);
+  double b1 = 0, b2 = 0;
+  perspective_barycentrics(px, py, iz, p.x(), p.y(), b1, b2);
   return Eigen::Vector3d(1.0 - b1 - b2, b1, b2);
 }
 

@@ -68,7 +68,12 @@ struct PerformanceCaptureOptions {
   int deformer_iterations = 4;     ///< TetDeformer iterations per round, 1..100
   double smoothness = 0.2;         ///< weight of the handle stiffness (membrane energy of the motion, per template edge, in pixels²), > 0
   double robust_px = 2.0;          ///< Huber scale of the ray residuals, pixels, > 0
-  double reject_px = 8.0;          ///< residuals above this (after the first solve) are outliers, pixels, > robust_px
+  /// Residuals above this after the first solve are outliers (weight 0), pixels, > robust_px.
+  /// The matches were already gated (ratio test, flow gate, agreement with their neighbours'
+  /// motion), so this only drops what is far off: a low threshold (8 px, measured) drops correct
+  /// matches exactly where the model is furthest off and keeps the error there
+  /// (docs/dev/performance_capture_experiments.md).
+  double reject_px = 40.0;
   // features
   bool features = true;            ///< SIFT feature constraints (false: silhouettes only)
   int max_features = 4000;         ///< SIFT keypoints per view and frame, 100..100000

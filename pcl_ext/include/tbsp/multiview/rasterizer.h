@@ -77,6 +77,13 @@ private:
 /// camera (such a triangle is never rendered).
 Eigen::Vector3d pixel_barycentrics(const TriMesh& mesh, const Camera& camera, int face, int x, int y);
 
+/// Perspective-correct barycentrics (b0, b1, b2) of triangle `face` at the sub-pixel image point
+/// `p` of `camera` (pixel centres at integer coordinates, as Camera::project): the point of the
+/// triangle's plane that projects to `p`. Outside the triangle some coordinates are negative (the
+/// plane extended). For lifting a keypoint at its exact position rather than at the centre of
+/// its pixel (up to half a pixel apart). O(1). \throws InvalidInput as pixel_barycentrics.
+Eigen::Vector3d point_barycentrics(const TriMesh& mesh, const Camera& camera, int face, const Eigen::Vector2d& p);
+
 /// Rim vertices of one view (§6.3.1, Fig. 6.2): vertices on the contour generator (incident to
 /// a front- and a back-facing triangle) that are visible and project within `tolerance_px`
 /// pixels of the outer border of the rendered silhouette (a covered pixel with an uncovered
