@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <random>
 
 #include "tbsp/io/render_images.h"
 #include "tbsp/core/error.h"
@@ -112,6 +113,37 @@ TEST(Rasterizer, PixelBarycentricsEqualTheBarycentricBuffer) {
   EXPECT_THROW(pixel_barycentrics(sphere, cam, int(sphere.F.rows()), 10, 10), InvalidInput);
   const Camera behind = Camera::lookAt("b", 320, 240, 1.2, {0, 0, 3}, {0, 0, 6}, {0, 1, 0});  // looks away
   EXPECT_THROW(pixel_barycentrics(sphere, behind, 0, 10, 10), InvalidInput);
+}
+
+// point_barycentrics: the point of the visible triangle's plane under a sub-pixel position projects
+// back onto that position (a pinhole camera: the projected triangle is exactly a triangle), and at
+// a pixel centre it agrees with pixel_barycentrics.
+TEST(Rasterizer, PointBarycentricsLiftASubPixelPositionExactly) {
+  const Camera cam = Camera::lookAt("c", 320, 240, 1.2, {0.4, 0.3, 3}, {0, 0, 0}, {0, 1, 0});
+  const TriMesh sphere = make_icosphere(3, 1.0);
+  RenderBuffers b;
+  Rasterizer().render(sphere, cam, b);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> frac(-0.5, 0.5);
+  int n = 0;
+  double worst_px = 0, worst_centre = 0;
+  for (int y = 0; y < b.height; y += 3)
+    for (int x = 0; x < b.width; x += 3) {
+      const std::int32_t f = b.face[std::size_t(y) * b.width + x];
+      if (f < 0) continue;
+      const Eigen::Vector2d p(x + frac(rng), y + frac(rng));
+      const Eigen::Vector3d q = point_barycentrics(sphere, cam, f, p);
+      Eigen::Vector3d X = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 3; ++k) X += q(k) * sphere.V.row(sphere.F(f, k)).transpose();
+      worst_px = std::max(worst_px, (cam.project(X) - p).norm());
+      worst_centre = std::max(worst_centre, (point_barycentrics(sphere, cam, f, Eigen::Vector2d(x, y)) -
+                                             pixel_barycentrics(sphere, cam, f, x, y)).cwiseAbs().maxCoeff());
+      ++n;
+    }
+  EXPECT_GT(n, 500);
+  EXPECT_LT(worst_px, 1e-6);
+  EXPECT_LE(worst_centre, 1e-6);  // pixel_barycentrics rounds b1, b2 to float as the buffer does
+  EXPECT_THROW(point_barycentrics(sphere, cam, -1, Eigen::Vector2d(10, 10)), InvalidInput);
 }
 
 TEST(Rasterizer, SharedEdgesLeaveNoGapsAndBackfacesCanBeCulled) {
