@@ -19,6 +19,9 @@
 //    --vlasic-turn: in-betweens that follow the body's turn (the best rotation between the two
 //    captured frames slerped, the rest linear in the rotating frame); linear ones squash the crane
 //    to 40-47 % of its volume where it turns by ~180 degrees (the table reports the smallest volume).
+//    --vlasic-rigid: the same turn, the rest by an as-rigid-as-possible shape interpolation (per
+//    triangle rotation slerped and stretch blended, vertices by a Poisson solve): near-isometric
+//    in-betweens such as a real body makes.
 //    --keyframes N [--keyframe-iou X] [--pose-rounds N] [--smoothness X] [--refine N] [--handles N]
 //    [--tets N] [--anchor-weight X] [--reject-px X] [--deformer-iterations N]: those
 //    PerformanceCaptureOptions (keyframe_interval, keyframe_iou, pose_rounds, smoothness,
@@ -36,10 +39,13 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <Eigen/SparseCholesky>
+#include <Eigen/SVD>
 
 #include "bench_util.h"
 
@@ -140,19 +146,92 @@ void capture_rows(int frames, int size, const std::vector<int>& details, const P
   }
 }
 
-// In-betweens of two captured frames A -> B. Linear: (1 - t) A + t B (the recipe). With
-// the turn: the best rotation R about the centroids (B ~ R (A - cA) + cB) is slerped and the rest
-// of the motion interpolated linearly in the rotating frame, X(t) = R_t (A - cA + t D) + (1 - t) cA
-// + t cB with D = R^T (B - cB) - (A - cA); both give A at t = 0 and B at t = 1.
-Eigen::MatrixX3d in_between(const Eigen::MatrixX3d& A, const Eigen::MatrixX3d& B, double t, bool follow_turn) {
-  if (!follow_turn) return (1 - t) * A + t * B;
+enum class InBetween { linear, turn, turn_rigid };
+
+// Shape interpolation that keeps each triangle as rigid as the two ends allow (Alexa et al. 2000;
+// Xu et al. 2005): per face, the deformation gradient from `a` to `b` (both centred, the global
+// turn removed) split by polar decomposition into a rotation Q and a stretch S; at t the face's
+// target is slerp(I, Q, t) ((1 - t) I + t S) applied to its rest edges; the vertex positions are the
+// least-squares fit of all edges (a Poisson solve, one factorization per pair), centred. Gives a
+// at t = 0 and b at t = 1 (up to the centring).
+class RigidInterpolation {
+public:
+  RigidInterpolation(const Eigen::MatrixX3d& a, const Eigen::MatrixX3d& b, const Eigen::MatrixX3i& F) : a_(a), F_(F) {
+    const Eigen::Index n = a.rows(), m = F.rows();
+    Q_.resize(std::size_t(m));
+    S_.resize(std::size_t(m));
+    std::vector<Eigen::Triplet<double>> L;
+    for (Eigen::Index f = 0; f < m; ++f) {
+      auto frame = [&](const Eigen::MatrixX3d& X) {
+        const Eigen::Vector3d e1 = X.row(F(f, 1)) - X.row(F(f, 0)), e2 = X.row(F(f, 2)) - X.row(F(f, 0));
+        const Eigen::Vector3d nrm = e1.cross(e2);
+        Eigen::Matrix3d M;
+        M << e1, e2, nrm / std::sqrt(std::max(nrm.norm(), 1e-300));
+        return M;
+      };
+      const Eigen::Matrix3d Ma = frame(a), Mb = frame(b);
+      Eigen::Matrix3d G = Eigen::Matrix3d::Identity();
+      if (std::abs(Ma.determinant()) > 1e-18) G = Mb * Ma.inverse();
+      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(G, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      Eigen::Matrix3d U = svd.matrixU();
+      Eigen::Vector3d sig = svd.singularValues();
+      if ((U * svd.matrixV().transpose()).determinant() < 0) {
+        U.col(2) *= -1;
+        sig(2) *= -1;
+      }
+      Q_[std::size_t(f)] = Eigen::Quaterniond(Eigen::Matrix3d(U * svd.matrixV().transpose()));
+      S_[std::size_t(f)] = svd.matrixV() * sig.asDiagonal() * svd.matrixV().transpose();
+      for (int k = 0; k < 3; ++k) {
+        const int i = F(f, k), j = F(f, (k + 1) % 3);
+        L.emplace_back(i, i, 1.0);
+        L.emplace_back(j, j, 1.0);
+        L.emplace_back(i, j, -1.0);
+        L.emplace_back(j, i, -1.0);
+      }
+    }
+    L.emplace_back(0, 0, 1e-8);  // translation: fixed by the centring below
+    Eigen::SparseMatrix<double> Lm(n, n);
+    Lm.setFromTriplets(L.begin(), L.end());
+    solver_.compute(Lm);
+  }
+  Eigen::MatrixX3d at(double t) const {
+    Eigen::MatrixX3d rhs = Eigen::MatrixX3d::Zero(a_.rows(), 3);
+    for (Eigen::Index f = 0; f < F_.rows(); ++f) {
+      const Eigen::Matrix3d G = Eigen::Quaterniond::Identity().slerp(t, Q_[std::size_t(f)]).toRotationMatrix() *
+                                ((1 - t) * Eigen::Matrix3d::Identity() + t * S_[std::size_t(f)]);
+      for (int k = 0; k < 3; ++k) {
+        const int i = F_(f, k), j = F_(f, (k + 1) % 3);
+        const Eigen::RowVector3d e = (G * (a_.row(j) - a_.row(i)).transpose()).transpose();
+        rhs.row(j) += e;
+        rhs.row(i) -= e;
+      }
+    }
+    Eigen::MatrixX3d X = solver_.solve(rhs);
+    return X.rowwise() - X.colwise().mean();
+  }
+
+private:
+  Eigen::MatrixX3d a_;
+  Eigen::MatrixX3i F_;
+  std::vector<Eigen::Quaterniond> Q_;
+  std::vector<Eigen::Matrix3d> S_;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver_;
+};
+
+// In-between of meshes A and B (same connectivity) at t in [0, 1]. linear: vertex positions
+// interpolated. turn: the best rotation R from A to B (about the centroids) slerped, the rest of
+// the motion interpolated linearly in the rotating frame, X(t) = R_t (A - cA + t D) + (1 - t) cA
+// + t cB with D = R^T (B - cB) - (A - cA). Both give A at t = 0 and B at t = 1. (turn_rigid: the
+// same turn, the rest by RigidInterpolation; in vlasic_rows, which factors once per gap.)
+Eigen::MatrixX3d in_between(const Eigen::MatrixX3d& A, const Eigen::MatrixX3d& B, double t, InBetween mode) {
+  if (mode == InBetween::linear) return (1 - t) * A + t * B;
   const Eigen::RowVector3d ca = A.colwise().mean(), cb = B.colwise().mean();
   const Eigen::MatrixX3d a = A.rowwise() - ca, b = B.rowwise() - cb;
   const Eigen::Matrix4d S = Eigen::umeyama(a.transpose(), b.transpose(), false);
   const Eigen::Matrix3d R = S.block<3, 3>(0, 0);
-  const Eigen::MatrixX3d D = b * R - a;  // rows: R^T (b_i) - a_i
+  const Eigen::MatrixX3d bt = b * R;  // rows: R^T (b_i)
   const Eigen::Quaterniond q = Eigen::Quaterniond::Identity().slerp(t, Eigen::Quaterniond(R));
-  const Eigen::MatrixX3d X = (a + t * D) * q.toRotationMatrix().transpose();
+  const Eigen::MatrixX3d X = (a + t * (bt - a)) * q.toRotationMatrix().transpose();
   return X.rowwise() + ((1 - t) * ca + t * cb);
 }
 
@@ -164,10 +243,13 @@ double mesh_volume(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
   return v;
 }
 
-void vlasic_rows(int steps, int size, bool follow_turn, const PerformanceCaptureOptions& po, const std::string& only) {
+void vlasic_rows(int steps, int size, InBetween mode, const PerformanceCaptureOptions& po, const std::string& only) {
   const std::string base = std::string(TBSP_SHARED_DATA_DIR) + "/meshes/CraGL__Hyperspectral-Inverse-Skinning/models/";
   std::printf("\n## Performance capture of the Vlasic meshes (8 views of %dx%d, %d in-between frames per 50 captured frames, %s)\n\n", size, size,
-              steps, follow_turn ? "in-betweens follow the body's turn" : "linear in-betweens");
+              steps,
+              mode == InBetween::linear ? "linear in-betweens"
+              : mode == InBetween::turn ? "in-betweens follow the body's turn"
+                                        : "in-betweens follow the body's turn, each triangle as rigid as the ends allow");
   std::printf("| sequence | vertices | frames | smallest in-between volume (%% of its keyframe) | error at 0050 / 0100 / 0150 (%% diag) | view IoU min at 0050 / 0100 / 0150 | worst error, all frames | worst view IoU, all frames | error last / frame 5 | failed frames | s per frame |\n"
               "|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const char* seq : {"samba", "crane"}) {
@@ -175,18 +257,40 @@ void vlasic_rows(int steps, int size, bool follow_turn, const PerformanceCapture
     std::vector<TriMesh> key;
     for (const char* f : {"0000", "0050", "0100", "0150"}) key.push_back(read_mesh(base + seq + "/mesh_" + f + ".obj"));
     const int frames = 3 * steps + 1;
+    std::vector<Eigen::MatrixX3d> truth(static_cast<std::size_t>(frames));
+    for (int g = 0; g < 3; ++g) {
+      const Eigen::MatrixX3d &A = key[std::size_t(g)].V, &B = key[std::size_t(g + 1)].V;
+      std::unique_ptr<RigidInterpolation> rigid;
+      Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+      const Eigen::RowVector3d ca = A.colwise().mean(), cb = B.colwise().mean();
+      for (int k = g == 0 ? 0 : 1; k <= steps; ++k) {
+        const double t = double(k) / steps;
+        Eigen::MatrixX3d& X = truth[std::size_t(g * steps + k)];
+        if (mode != InBetween::turn_rigid) {
+          X = in_between(A, B, t, mode);
+          continue;
+        }
+        if (!rigid) {  // one factorization per gap
+          const Eigen::MatrixX3d a = A.rowwise() - ca, b = B.rowwise() - cb;
+          R = Eigen::umeyama(a.transpose(), b.transpose(), false).block<3, 3>(0, 0);
+          rigid = std::make_unique<RigidInterpolation>(a, b * R, key[0].F);
+        }
+        const Eigen::Quaterniond q = Eigen::Quaterniond::Identity().slerp(t, Eigen::Quaterniond(R));
+        X = (rigid->at(t) * q.toRotationMatrix().transpose()).rowwise() + ((1 - t) * ca + t * cb);
+        if (k == steps) X = B;  // exactly the captured frame (the solve reproduces it to rounding)
+      }
+    }
     auto frame = [&](int f) {
-      const int g = std::min(f / steps, 2);
-      const double t = double(f - g * steps) / steps;
-      TriMesh m = key[std::size_t(g)];
-      m.V = in_between(key[std::size_t(g)].V, key[std::size_t(g + 1)].V, t, follow_turn);
+      TriMesh m = key[0];
+      m.V = truth[std::size_t(f)];
       return m;
     };
     // How much volume the in-betweens lose (a body squashed through a turn is no performance).
     double min_volume = 1;
     for (int f = 0; f < frames; ++f)
       min_volume = std::min(min_volume, mesh_volume(frame(f).V, key[0].F) / mesh_volume(key[std::size_t(std::min(f / steps, 2))].V, key[0].F));
-    const std::string dir = std::string("/tmp/tbsp_bench_vlasic_") + seq + (follow_turn ? "_turn" : "");
+    const std::string dir = std::string("/tmp/tbsp_bench_vlasic_") + seq +
+                            (mode == InBetween::linear ? "" : mode == InBetween::turn ? "_turn" : "_rigid");
     synth::StudioOptions so;
     so.frames = frames;
     so.width = so.height = size;
@@ -330,7 +434,8 @@ void stereo_rows(int frames, int size) {
 
 int main(int argc, char** argv) {
   int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0, stereo = 0, hull = 0;
-  bool capture_only = false, vlasic_turn = false;
+  bool capture_only = false;
+  InBetween vlasic_mode = InBetween::linear;
   std::string vlasic_only;  // samba or crane; empty = both
   int capture_detail = 1;
   PerformanceCaptureOptions po;  // defaults, unless a flag below changes them
@@ -342,7 +447,8 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--capture-detail") && i + 1 < argc) capture_detail = std::clamp(std::atoi(argv[++i]), 1, 2);
     else if (!std::strcmp(argv[i], "--vlasic") && i + 1 < argc) vlasic = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--stereo") && i + 1 < argc) stereo = std::max(0, std::atoi(argv[++i]));
-    else if (!std::strcmp(argv[i], "--vlasic-turn")) vlasic_turn = true;
+    else if (!std::strcmp(argv[i], "--vlasic-turn")) vlasic_mode = InBetween::turn;
+    else if (!std::strcmp(argv[i], "--vlasic-rigid")) vlasic_mode = InBetween::turn_rigid;
     else if (!std::strcmp(argv[i], "--hull") && i + 1 < argc) hull = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--keyframes") && i + 1 < argc) po.keyframe_interval = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--keyframe-iou") && i + 1 < argc) po.keyframe_iou = std::atof(argv[++i]);
@@ -356,7 +462,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--deformer-iterations") && i + 1 < argc) po.deformer_iterations = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--vlasic-only") && i + 1 < argc) vlasic_only = argv[++i];
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn]] [--keyframes N [--keyframe-iou X]] [--pose-rounds N] [--smoothness X] [--refine N] [--handles N] [--tets N] [--anchor-weight X] [--reject-px X] [--deformer-iterations N] [--vlasic-only samba|crane] [--stereo FRAMES] [--hull FRAMES]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn | --vlasic-rigid]] [--keyframes N [--keyframe-iou X]] [--pose-rounds N] [--smoothness X] [--refine N] [--handles N] [--tets N] [--anchor-weight X] [--reject-px X] [--deformer-iterations N] [--vlasic-only samba|crane] [--stereo FRAMES] [--hull FRAMES]\n");
       return 2;
     }
   }
@@ -367,7 +473,7 @@ int main(int argc, char** argv) {
       return 2;
     }
     if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {capture_detail}, po);
-    if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_turn, po, vlasic_only);
+    if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_mode, po, vlasic_only);
     if (stereo > 0) stereo_rows(stereo, capture_size);
     if (hull > 0) hull_rows(hull, capture_size);
     return 0;
