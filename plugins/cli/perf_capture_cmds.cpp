@@ -51,6 +51,11 @@ void add_capture(CLI::App& app, CaptureArgs& a, CLI::App*& sub) {
   sub->add_option("--handles", a.o.handles, "handle vertices on the control surface (default 150)");
   sub->add_option("--rounds", a.o.pose_rounds, "pose rounds per frame (default 3)");
   sub->add_flag("--no-features", a.no_features, "silhouettes only (no SIFT feature tracking)");
+  sub->add_option("--keyframes", a.o.keyframe_interval,
+                  "keyframe anchors: every N frames at most, a frame whose worst view IoU reaches --keyframe-iou adds its keypoints to "
+                  "the first frame's anchors (for performers that turn away from the first frame's views; default 0 = off)")
+      ->check(CLI::Range(0, 10000));
+  sub->add_option("--keyframe-iou", a.o.keyframe_iou, "worst view IoU a keyframe needs (default 0.98)")->check(CLI::Range(0.0, 1.0));
   sub->add_flag("--optimize-handles", a.o.optimize_handles, "the thesis' black-box handle optimization (NLopt BOBYQA) after the pose step");
   sub->add_option("--refine-iterations", a.o.refine_iterations, "silhouette refinement iterations per frame (default 5; 0 = none)");
   sub->add_flag("--stereo", a.o.stereo_refine, "model-guided stereo after the silhouette refinement (§6.3.3: folds, concavities; ~1-2 s per frame)");
@@ -83,6 +88,7 @@ nlohmann::json frame_json(const CaptureFrameReport& f) {
           {"keypoints", f.keypoints},
           {"temporal_matches", f.temporal_matches},
           {"anchor_matches", f.anchor_matches},
+          {"keyframe", f.keyframe},
           {"feature_inliers", f.inliers},
           {"rim_constraints", f.rim_constraints},
           {"stereo_points", f.stereo_points},

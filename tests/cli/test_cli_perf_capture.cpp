@@ -54,7 +54,7 @@ TEST(CliPerfCapture, TracksAStudioIntoMeshesReportAndOverlays) {
   cv::imwrite(sil.string(), cv::Mat::zeros(300, 300, CV_8U));
   const fs::path out2 = dir / "out2";
   r = test::run_cli("capture -q " + bad.string() + " --template " + (bad / "template.ply").string() + " --out " + out2.string() +
-                        " --frames 1:3 --overlays 0 --tets 3000 --smooth 1",
+                        " --frames 1:3 --overlays 0 --tets 3000 --smooth 1 --keyframes 1 --keyframe-iou 0.5",
                     dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("cam2"), std::string::npos) << r.err;
@@ -66,6 +66,9 @@ TEST(CliPerfCapture, TracksAStudioIntoMeshesReportAndOverlays) {
   EXPECT_TRUE(fs::exists(out2 / "mesh_0002.ply"));
   EXPECT_EQ(rep2["meshes_written"].get<int>(), 2);
   EXPECT_EQ(rep2["smooth_sigma_frames"].get<double>(), 1.0);
+  ASSERT_EQ(rep2["per_frame"].size(), 2u);  // --keyframes 1: the second tracked frame adds its keypoints to the anchors
+  EXPECT_FALSE(rep2["per_frame"][0]["keyframe"].get<bool>());
+  EXPECT_TRUE(rep2["per_frame"][1]["keyframe"].get<bool>());
 
   // A studio without silhouettes, a missing template: exit 2 naming what is missing; the first
   // run's report is not clobbered.
