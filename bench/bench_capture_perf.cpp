@@ -218,22 +218,39 @@ private:
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver_;
 };
 
-// In-between of meshes A and B (same connectivity) at t in [0, 1]. linear: vertex positions
-// interpolated. turn: the best rotation R from A to B (about the centroids) slerped, the rest of
-// the motion interpolated linearly in the rotating frame, X(t) = R_t (A - cA + t D) + (1 - t) cA
-// + t cB with D = R^T (B - cB) - (A - cA). Both give A at t = 0 and B at t = 1. (turn_rigid: the
-// same turn, the rest by RigidInterpolation; in vlasic_rows, which factors once per gap.)
-Eigen::MatrixX3d in_between(const Eigen::MatrixX3d& A, const Eigen::MatrixX3d& B, double t, InBetween mode) {
-  if (mode == InBetween::linear) return (1 - t) * A + t * B;
-  const Eigen::RowVector3d ca = A.colwise().mean(), cb = B.colwise().mean();
-  const Eigen::MatrixX3d a = A.rowwise() - ca, b = B.rowwise() - cb;
-  const Eigen::Matrix4d S = Eigen::umeyama(a.transpose(), b.transpose(), false);
-  const Eigen::Matrix3d R = S.block<3, 3>(0, 0);
-  const Eigen::MatrixX3d bt = b * R;  // rows: R^T (b_i)
-  const Eigen::Quaterniond q = Eigen::Quaterniond::Identity().slerp(t, Eigen::Quaterniond(R));
-  const Eigen::MatrixX3d X = (a + t * (bt - a)) * q.toRotationMatrix().transpose();
-  return X.rowwise() + ((1 - t) * ca + t * cb);
-}
+// In-betweens of two captured frames A -> B (same connectivity), t in [0, 1]. linear: vertex
+// positions interpolated (the recipe). turn: the best rotation R from A to B about the
+// centroids slerped, the rest of the motion interpolated linearly in the rotating frame,
+// X(t) = R_t (A - cA + t (R^T (B - cB) - (A - cA))) + (1 - t) cA + t cB. turn_rigid: the same
+// turn, the rest by RigidInterpolation (factored once per pair, in the constructor).
+class GapInterpolation {
+public:
+  GapInterpolation(const Eigen::MatrixX3d& A, const Eigen::MatrixX3d& B, const Eigen::MatrixX3i& F, InBetween mode)
+      : A_(A), B_(B), mode_(mode) {
+    if (mode == InBetween::linear) return;
+    ca_ = A.colwise().mean();
+    cb_ = B.colwise().mean();
+    a_ = A.rowwise() - ca_;
+    const Eigen::MatrixX3d b = B.rowwise() - cb_;
+    R_ = Eigen::umeyama(a_.transpose(), b.transpose(), false).block<3, 3>(0, 0);
+    bt_ = b * R_;  // rows: R^T (b_i)
+    if (mode == InBetween::turn_rigid) rigid_ = std::make_unique<RigidInterpolation>(a_, bt_, F);
+  }
+  Eigen::MatrixX3d at(double t) const {
+    if (mode_ == InBetween::linear) return (1 - t) * A_ + t * B_;
+    if (mode_ == InBetween::turn_rigid && t == 1) return B_;  // exactly the captured frame (the solve reproduces it to rounding)
+    const Eigen::MatrixX3d shape = rigid_ ? rigid_->at(t) : Eigen::MatrixX3d(a_ + t * (bt_ - a_));
+    const Eigen::Quaterniond q = Eigen::Quaterniond::Identity().slerp(t, Eigen::Quaterniond(R_));
+    return (shape * q.toRotationMatrix().transpose()).rowwise() + ((1 - t) * ca_ + t * cb_);
+  }
+
+private:
+  Eigen::MatrixX3d A_, B_, a_, bt_;
+  InBetween mode_;
+  Eigen::RowVector3d ca_, cb_;
+  Eigen::Matrix3d R_ = Eigen::Matrix3d::Identity();
+  std::unique_ptr<RigidInterpolation> rigid_;
+};
 
 // Signed volume of a closed mesh.
 double mesh_volume(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
@@ -259,26 +276,8 @@ void vlasic_rows(int steps, int size, InBetween mode, const PerformanceCaptureOp
     const int frames = 3 * steps + 1;
     std::vector<Eigen::MatrixX3d> truth(static_cast<std::size_t>(frames));
     for (int g = 0; g < 3; ++g) {
-      const Eigen::MatrixX3d &A = key[std::size_t(g)].V, &B = key[std::size_t(g + 1)].V;
-      std::unique_ptr<RigidInterpolation> rigid;
-      Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-      const Eigen::RowVector3d ca = A.colwise().mean(), cb = B.colwise().mean();
-      for (int k = g == 0 ? 0 : 1; k <= steps; ++k) {
-        const double t = double(k) / steps;
-        Eigen::MatrixX3d& X = truth[std::size_t(g * steps + k)];
-        if (mode != InBetween::turn_rigid) {
-          X = in_between(A, B, t, mode);
-          continue;
-        }
-        if (!rigid) {  // one factorization per gap
-          const Eigen::MatrixX3d a = A.rowwise() - ca, b = B.rowwise() - cb;
-          R = Eigen::umeyama(a.transpose(), b.transpose(), false).block<3, 3>(0, 0);
-          rigid = std::make_unique<RigidInterpolation>(a, b * R, key[0].F);
-        }
-        const Eigen::Quaterniond q = Eigen::Quaterniond::Identity().slerp(t, Eigen::Quaterniond(R));
-        X = (rigid->at(t) * q.toRotationMatrix().transpose()).rowwise() + ((1 - t) * ca + t * cb);
-        if (k == steps) X = B;  // exactly the captured frame (the solve reproduces it to rounding)
-      }
+      const GapInterpolation gap(key[std::size_t(g)].V, key[std::size_t(g + 1)].V, key[0].F, mode);
+      for (int k = g == 0 ? 0 : 1; k <= steps; ++k) truth[std::size_t(g * steps + k)] = gap.at(double(k) / steps);
     }
     auto frame = [&](int f) {
       TriMesh m = key[0];
