@@ -61,7 +61,7 @@ std::string Studio::groundTruthPath(int f) const { return resolve(expand_frame_p
 // ------------------------------------------------------------------------------- reading
 namespace {
 
-struct Ctx {
+struct StudioCtx {
   std::string path;
   [[noreturn]] void fail(const YAML::Node& n, const std::string& msg) const {
     const int line = n.Mark().line >= 0 ? n.Mark().line + 1 : 0;
@@ -151,7 +151,7 @@ Studio read_studio_file(const std::string& path) {
   } catch (const YAML::Exception& e) {
     throw FileError(path + ": cannot read: " + e.what());
   }
-  Ctx c{path};
+  StudioCtx c{path};
   if (!root.IsMap()) throw FileError(path + ": not a studio file: expected a YAML mapping with 'tbsp_studio: 1'");
   const YAML::Node ver = root["tbsp_studio"];
   if (!ver) c.fail(root, "not a tbsp studio file: the key 'tbsp_studio: 1' (format version) is missing");

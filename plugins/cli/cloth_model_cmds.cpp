@@ -171,14 +171,14 @@ int cmd_proxies(const ProxiesArgs& a) {
 
 // ---- tbsp cloth animate
 
-struct AnimateArgs {
+struct ClothAnimateArgs {
   std::string model, bvh, out, frames, joint_map;
   double scale = 0.01;
   int step = 3, every = 1, sheet = 8, settle = 40;
   bool no_meshes = false, quiet = false;
 };
 
-void add_animate(CLI::App& cloth, AnimateArgs& a, CLI::App*& sub) {
+void add_cloth_animate(CLI::App& cloth, ClothAnimateArgs& a, CLI::App*& sub) {
   sub = cloth.add_subcommand("animate", "a new animation: an animatable model driven by a BVH clip (skinning + cloth simulation)");
   sub->add_option("--model", a.model, "model JSON from `tbsp cloth build`")->required();
   sub->add_option("--bvh", a.bvh, "BVH clip with the model's joint names (or any clip with --joint-map)")->required();
@@ -196,7 +196,7 @@ void add_animate(CLI::App& cloth, AnimateArgs& a, CLI::App*& sub) {
   sub->add_flag("-q,--quiet", a.quiet, "no progress bar");
 }
 
-int cmd_animate(const AnimateArgs& a) {
+int cmd_cloth_animate(const ClothAnimateArgs& a) {
   AnimatableModel model = load_animatable_model(a.model);
   const BvhMotion clip = read_bvh(a.bvh);
   // the simulation advances by the clip's time between two simulated frames (a 30 Hz clip at
@@ -288,7 +288,7 @@ int cmd_animate(const AnimateArgs& a) {
 void add_cloth_model_commands(CLI::App& cloth, CommandTable& table) {
   register_command<BuildArgs>(cloth, table, add_build, cmd_build);
   register_command<ProxiesArgs>(cloth, table, add_proxies, cmd_proxies);
-  register_command<AnimateArgs>(cloth, table, add_animate, cmd_animate);
+  register_command<ClothAnimateArgs>(cloth, table, add_cloth_animate, cmd_cloth_animate);
 }
 
 void add_cloth_commands(CLI::App& app, CommandTable& table) {

@@ -13,11 +13,11 @@ namespace tbsp {
 
 namespace {
 
-using Ctx = JsonReader;
+using ConstraintsCtx = JsonReader;
 
 
 
-Eigen::Matrix3d rotation(const nlohmann::json& j, const Ctx& c, const std::string& where) {
+Eigen::Matrix3d rotation(const nlohmann::json& j, const ConstraintsCtx& c, const std::string& where) {
   if (!j.is_object()) c.fail(where, "expected {\"axis\": [x,y,z], \"angle_deg\": a}, {\"quaternion\": [w,x,y,z]} or {\"matrix\": [[..],[..],[..]]}");
   Eigen::Matrix3d R;
   if (j.contains("axis")) {
@@ -45,7 +45,7 @@ Eigen::Matrix3d rotation(const nlohmann::json& j, const Ctx& c, const std::strin
 }
 
 // 4x4 (row-major) or 3x4 rigid/affine transform
-Eigen::Matrix4d transform(const nlohmann::json& j, const Ctx& c, const std::string& where) {
+Eigen::Matrix4d transform(const nlohmann::json& j, const ConstraintsCtx& c, const std::string& where) {
   if (!j.is_array() || (j.size() != 4 && j.size() != 3)) c.fail(where, "expected a 4x4 (or 3x4) row-major matrix");
   Eigen::Matrix4d M = Eigen::Matrix4d::Identity();
   for (std::size_t r = 0; r < j.size(); ++r) {
@@ -60,7 +60,7 @@ Eigen::Matrix4d transform(const nlohmann::json& j, const Ctx& c, const std::stri
 }  // namespace
 
 DeformJob parse_constraints_json(const nlohmann::json& doc, const TriMesh& mesh, const std::string& source) try {
-  const Ctx c{source};
+  const ConstraintsCtx c{source};
   DeformJob job;
   if (!doc.is_object()) c.fail("top level", "expected an object with a \"constraints\" array");
   c.check_keys(doc, {"constraints", "laplacian", "rotation_field", "scale", "comment"}, "top level");

@@ -17,7 +17,7 @@ namespace fs = std::filesystem;
 namespace tbsp::pipeline {
 namespace {
 
-struct Ctx {
+struct PipelineCtx {
   std::string file, base;
   [[noreturn]] void fail(const YAML::Node& n, const std::string& msg) const { throw PipelineError(file, line(n), msg); }
   static int line(const YAML::Node& n) { return n.Mark().line >= 0 ? n.Mark().line + 1 : 0; }
@@ -57,7 +57,7 @@ std::string join(const std::vector<std::string>& v) {
   return s;
 }
 
-void check_keys(const Ctx& c, const YAML::Node& map, const std::vector<std::string>& allowed, const std::string& where) {
+void check_keys(const PipelineCtx& c, const YAML::Node& map, const std::vector<std::string>& allowed, const std::string& where) {
   for (const auto& kv : map) {
     const std::string k = kv.first.Scalar();
     if (std::find(allowed.begin(), allowed.end(), k) == allowed.end())
@@ -65,14 +65,14 @@ void check_keys(const Ctx& c, const YAML::Node& map, const std::vector<std::stri
   }
 }
 
-std::string scalar(const Ctx& c, const YAML::Node& n, const std::string& what) {
+std::string scalar(const PipelineCtx& c, const YAML::Node& n, const std::string& what) {
   if (!n.IsScalar()) c.fail(n, what + " must be a single value, not a " + (n.IsMap() ? "map" : n.IsSequence() ? "list" : "null"));
   return n.Scalar();
 }
 
 // Converts one written value (file or default) to the parameter's type, checking range/choices.
 // `where` is the node to blame (nullptr: a default, i.e. a bug in the plugin).
-Params::Value convert(const Ctx& c, const ParamSpec& p, const std::string& text, const YAML::Node* where,
+Params::Value convert(const PipelineCtx& c, const ParamSpec& p, const std::string& text, const YAML::Node* where,
                       const std::string& stage) {
   auto bad = [&](const std::string& why) -> Params::Value {
     const std::string msg = "parameter '" + p.name + "' of stage '" + stage + "': " + why;
@@ -137,7 +137,7 @@ Params::Value convert(const Ctx& c, const ParamSpec& p, const std::string& text,
   return bad("unknown parameter type");
 }
 
-Params read_params(const Ctx& c, const StageInfo& info, const YAML::Node& node, const YAML::Node& at) {
+Params read_params(const PipelineCtx& c, const StageInfo& info, const YAML::Node& node, const YAML::Node& at) {
   Params out;
   std::vector<std::string> names;
   for (const auto& p : info.params) names.push_back(p.name);
@@ -177,7 +177,7 @@ struct Raw {
 }  // namespace
 
 Pipeline parse_pipeline(const std::string& text, const std::string& base_dir, const std::string& file, const Registry& reg) {
-  Ctx c{file, base_dir};
+  PipelineCtx c{file, base_dir};
   YAML::Node root;
   try {
     root = YAML::Load(text);
@@ -221,7 +221,7 @@ Pipeline parse_pipeline(const std::string& text, const std::string& base_dir, co
     if (!sn.IsMap()) c.fail(sn, "each entry of 'stages' is a map with 'id', 'stage', 'params' and 'input'/'inputs'");
     check_keys(c, sn, {"id", "stage", "params", "input", "inputs"}, "a stage entry");
     Raw r;
-    r.node.line = Ctx::line(sn);
+    r.node.line = PipelineCtx::line(sn);
     if (!sn["stage"]) c.fail(sn, "stage entry without 'stage:' (the stage to run; `tbsp plugins` lists them)");
     r.node.stage = scalar(c, sn["stage"], "'stage'");
     const StageInfo* info = reg.find(r.node.stage);
@@ -249,7 +249,7 @@ Pipeline parse_pipeline(const std::string& text, const std::string& base_dir, co
       auto target = std::find_if(info->inputs.begin(), info->inputs.end(), [](const PortSpec& p) { return !p.optional; });
       if (target == info->inputs.end()) target = info->inputs.begin();
       r.node.inputs[target->name] = split_ref(ref);
-      r.input_lines[target->name] = Ctx::line(in);
+      r.input_lines[target->name] = PipelineCtx::line(in);
     }
     if (const YAML::Node in = sn["inputs"]) {
       if (!in.IsMap()) c.fail(in, "'inputs' must be a map PORT: NODE (or NODE.PORT)");
@@ -261,7 +261,7 @@ Pipeline parse_pipeline(const std::string& text, const std::string& base_dir, co
           c.fail(kv.first, "stage '" + info->name + "' has no input '" + port + "'" + did_you_mean(port, ports) + "; its inputs: " +
                                (ports.empty() ? "none" : join(ports)));
         r.node.inputs[port] = split_ref(scalar(c, kv.second, "input '" + port + "'"));
-        r.input_lines[port] = Ctx::line(kv.second);
+        r.input_lines[port] = PipelineCtx::line(kv.second);
       }
     }
     for (const auto& p : info->inputs)

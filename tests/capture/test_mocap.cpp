@@ -10,8 +10,8 @@
 using namespace tbsp;
 
 namespace {
-void write(const std::filesystem::path& p, const std::string& s) { std::ofstream(p, std::ios::binary) << s; }
-std::string error_of(const std::function<void()>& f) {
+void write_mocap(const std::filesystem::path& p, const std::string& s) { std::ofstream(p, std::ios::binary) << s; }
+std::string mocap_error_of(const std::function<void()>& f) {
   try { f(); } catch (const FileError& e) { return e.what(); }
   return "";
 }
@@ -22,8 +22,8 @@ template <typename Read>
 void expect_file_errors(const std::filesystem::path& dir, const char* ext, const std::vector<Case>& cases, Read read) {
   for (const Case& c : cases) {
     const auto f = dir / (std::string(c.name) + ext);
-    write(f, c.text);
-    const std::string e = error_of([&] { read(f.string()); });
+    write_mocap(f, c.text);
+    const std::string e = mocap_error_of([&] { read(f.string()); });
     EXPECT_NE(e, "") << c.name;
     EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": '" << e << "'";
     EXPECT_NE(e.find(f.string()), std::string::npos) << c.name;
@@ -143,12 +143,12 @@ TEST(Trc, MalformedFilesGiveClearErrors) {
       {"rate", replace("100\t100\t4", "-1\t100\t4"), "DataRate"},
       {"empty", "", "file ends"},
   }, [](const std::string& f) { read_trc(f); });
-  EXPECT_NE(error_of([&] { read_trc((dir / "missing.trc").string()); }).find("no such file"), std::string::npos);
+  EXPECT_NE(mocap_error_of([&] { read_trc((dir / "missing.trc").string()); }).find("no such file"), std::string::npos);
 }
 
 TEST(C3d, MinimalIntelFloatFileParses) {
   const auto dir = test::temp_dir("c3d");
-  write(dir / "a.c3d", make_c3d(3, 4, -1.0f));
+  write_mocap(dir / "a.c3d", make_c3d(3, 4, -1.0f));
   const MarkerTrajectories m = read_c3d((dir / "a.c3d").string());
   EXPECT_EQ(m.numMarkers(), 3);
   EXPECT_EQ(m.numFrames(), 4);
@@ -189,7 +189,7 @@ TEST(C3d, MalformedFilesGiveClearErrors) {
 
 TEST(Bvh, RoundTripAndForwardKinematics) {
   const auto dir = test::temp_dir("bvh");
-  write(dir / "a.bvh",
+  write_mocap(dir / "a.bvh",
         "HIERARCHY\nROOT hip\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
         " JOINT knee\n {\n  OFFSET 0 -10 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 -8 0\n  }\n }\n}\n"
         "MOTION\nFrames: 2\nFrame Time: 0.04\n0 100 0 0 0 0 0 0 0\n5 100 0 90 0 0 0 0 0\n");
@@ -230,6 +230,6 @@ TEST(Bvh, MalformedFilesGiveClearErrors) {
   // Deep nesting does not overflow the stack.
   std::string deep = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 0\n";
   for (int i = 0; i < 5000; ++i) deep += "JOINT j\n{\nOFFSET 0 0 0\nCHANNELS 0\n";
-  write(dir / "deep.bvh", deep);
-  EXPECT_NE(error_of([&] { read_bvh((dir / "deep.bvh").string()); }).find("deeper"), std::string::npos);
+  write_mocap(dir / "deep.bvh", deep);
+  EXPECT_NE(mocap_error_of([&] { read_bvh((dir / "deep.bvh").string()); }).find("deeper"), std::string::npos);
 }

@@ -12,7 +12,7 @@
 using namespace tbsp;
 
 namespace {
-std::string write(const std::filesystem::path& dir, const std::string& name, const std::string& text) {
+std::string write_conf_file(const std::filesystem::path& dir, const std::string& name, const std::string& text) {
   const auto p = dir / name;
   std::ofstream(p) << text;
   return p.string();
@@ -34,7 +34,7 @@ TEST(RangeScanConf, ReadsPosesWithTheInverseRotation) {
   const auto dir = test::temp_dir("conf");
   // a quarter turn about z: q = (0, 0, sin 45°, cos 45°); the scan's x axis must go to -y
   const double s = std::sqrt(0.5);
-  const std::string conf = write(dir, "a.conf",
+  const std::string conf = write_conf_file(dir, "a.conf",
                                  "camera 0 0 1  0 0 0 1\n"
                                  "# comment line\n\n"
                                  "bmesh a.ply 1 2 3  0 0 " + std::to_string(s) + " " + std::to_string(s) + "\n"
@@ -47,8 +47,8 @@ TEST(RangeScanConf, ReadsPosesWithTheInverseRotation) {
   EXPECT_NEAR((poses[1].scan_to_world.linear() - Eigen::Matrix3d::Identity()).norm(), 0, 1e-12);
 
   // the scans themselves: an ASCII PLY cloud per scan, placed and concatenated in the asked order
-  write(dir, "a.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 0 0\n");
-  write(dir, "b.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n5 6 7\n8 9 10\n");
+  write_conf_file(dir, "a.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 0 0\n");
+  write_conf_file(dir, "b.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n5 6 7\n8 9 10\n");
   const Eigen::MatrixX3d P = read_registered_range_scans(conf, {"b.ply", "a.ply"});
   ASSERT_EQ(P.rows(), 3);
   EXPECT_NEAR((P.row(0) - Eigen::RowVector3d(5, 6, 7)).norm(), 0, 1e-6);
@@ -73,13 +73,13 @@ TEST(RangeScanConf, RefusesMalformedLines) {
                         Case{"camera 0 0 0 0 0 0\n", "expected 7 numbers"},
                         Case{"# nothing\n", "no 'bmesh"},
                         Case{"", "no 'bmesh"}}) {
-    const std::string path = write(dir, "bad.conf", c.text);
+    const std::string path = write_conf_file(dir, "bad.conf", c.text);
     const std::string msg = error_of([&] { read_range_scan_conf(path); });
     EXPECT_NE(msg.find(c.expect), std::string::npos) << "input: " << c.text << "\nmessage: " << msg;
     EXPECT_NE(msg.find("bad.conf"), std::string::npos) << msg;
   }
   EXPECT_NE(error_of([&] { read_range_scan_conf((dir / "missing.conf").string()); }).find("no such file"), std::string::npos);
   // a listed scan that is not there: the reader's error names it
-  const std::string conf = write(dir, "ok.conf", "bmesh gone.ply 0 0 0 0 0 0 1\n");
+  const std::string conf = write_conf_file(dir, "ok.conf", "bmesh gone.ply 0 0 0 0 0 0 1\n");
   EXPECT_NE(error_of([&] { read_registered_range_scans(conf); }).find("gone.ply"), std::string::npos);
 }

@@ -15,23 +15,23 @@
 namespace tbsp {
 
 namespace {
-const char* kWhere = "[tbsp::ClothSegmentation] ";
+const char* kSegmentationWhere = "[tbsp::ClothSegmentation] ";
 }
 
 void ClothSegmentation::setOptions(const ClothSegmentationOptions& o) {
   if (!(o.t_rigid >= 0) || !(o.t_cloth > o.t_rigid) || !std::isfinite(o.t_cloth))
-    throw InvalidInput(std::string(kWhere) + "setOptions: need 0 ≤ t_rigid < t_cloth (got " + std::to_string(o.t_rigid) + ", " +
+    throw InvalidInput(std::string(kSegmentationWhere) + "setOptions: need 0 ≤ t_rigid < t_cloth (got " + std::to_string(o.t_rigid) + ", " +
                        std::to_string(o.t_cloth) + ")");
-  if (!(o.diffusion >= 0 && o.diffusion <= 1e4)) throw InvalidInput(std::string(kWhere) + "setOptions: diffusion must be in [0, 1e4]");
-  if (o.median_passes < 0 || o.median_passes > 10) throw InvalidInput(std::string(kWhere) + "setOptions: median_passes must be in 0..10");
+  if (!(o.diffusion >= 0 && o.diffusion <= 1e4)) throw InvalidInput(std::string(kSegmentationWhere) + "setOptions: diffusion must be in [0, 1e4]");
+  if (o.median_passes < 0 || o.median_passes > 10) throw InvalidInput(std::string(kSegmentationWhere) + "setOptions: median_passes must be in 0..10");
   options_ = o;
 }
 
 void ClothSegmentation::begin(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
-  if (V.rows() == 0 || F.rows() == 0) throw InvalidInput(std::string(kWhere) + "begin: the first frame is empty");
-  if (!V.allFinite()) throw InvalidInput(std::string(kWhere) + "begin: the first frame has non-finite coordinates");
+  if (V.rows() == 0 || F.rows() == 0) throw InvalidInput(std::string(kSegmentationWhere) + "begin: the first frame is empty");
+  if (!V.allFinite()) throw InvalidInput(std::string(kSegmentationWhere) + "begin: the first frame has non-finite coordinates");
   if (F.minCoeff() < 0 || F.maxCoeff() >= V.rows())
-    throw InvalidInput(std::string(kWhere) + "begin: a face index is out of range (" + std::to_string(V.rows()) + " vertices)");
+    throw InvalidInput(std::string(kSegmentationWhere) + "begin: a face index is out of range (" + std::to_string(V.rows()) + " vertices)");
   V0_ = V;
   F_ = F;
   const Eigen::Index n = V.rows();
@@ -56,15 +56,15 @@ void ClothSegmentation::begin(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i&
 }
 
 void ClothSegmentation::addFrame(const Eigen::MatrixX3d& V) {
-  if (face_.size() == 0) throw InvalidInput(std::string(kWhere) + "addFrame: call begin() with the first frame first");
+  if (face_.size() == 0) throw InvalidInput(std::string(kSegmentationWhere) + "addFrame: call begin() with the first frame first");
   const int frame = frames_ + 1;
   if (V.rows() != V0_.rows())
-    throw InvalidInput(std::string(kWhere) + "frame " + std::to_string(frame) + " has " + std::to_string(V.rows()) +
+    throw InvalidInput(std::string(kSegmentationWhere) + "frame " + std::to_string(frame) + " has " + std::to_string(V.rows()) +
                        " vertices, the first frame " + std::to_string(V0_.rows()) +
                        ": a sequence must keep its connectivity (track one template through it)");
   for (Eigen::Index i = 0; i < V.rows(); ++i)
     if (!V.row(i).allFinite())
-      throw InvalidInput(std::string(kWhere) + "frame " + std::to_string(frame) + ", vertex " + std::to_string(i) +
+      throw InvalidInput(std::string(kSegmentationWhere) + "frame " + std::to_string(frame) + ", vertex " + std::to_string(i) +
                          " is not finite (NaN/Inf): repair or drop the frame");
   ++frames_;
   for (Eigen::Index i = 0; i < V.rows(); ++i) {
@@ -81,8 +81,8 @@ void ClothSegmentation::addFrame(const Eigen::MatrixX3d& V) {
 }
 
 ClothSegmentation::Result ClothSegmentation::finish() const {
-  if (face_.size() == 0) throw InvalidInput(std::string(kWhere) + "finish: no sequence (call begin and addFrame)");
-  if (frames_ < 2) throw InvalidInput(std::string(kWhere) + "finish: " + std::to_string(frames_) + " frame(s); σ needs at least 2");
+  if (face_.size() == 0) throw InvalidInput(std::string(kSegmentationWhere) + "finish: no sequence (call begin and addFrame)");
+  if (frames_ < 2) throw InvalidInput(std::string(kSegmentationWhere) + "finish: " + std::to_string(frames_) + " frame(s); σ needs at least 2");
   const Eigen::Index n = V0_.rows();
   const double diag = bbox_diagonal(V0_);
   Result r;

@@ -17,7 +17,7 @@ namespace tbsp {
 
 namespace {
 
-const char* kWhere = "[tbsp::PbdClothSimulator] ";
+const char* kSimulatorWhere = "[tbsp::PbdClothSimulator] ";
 
 // Greedy colouring: constraint c gets the smallest colour none of its vertices has yet. Colours
 // 0..127 are tracked per vertex; a constraint that finds all taken goes to a last colour that is
@@ -61,13 +61,13 @@ double dihedral(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eige
 }  // namespace
 
 void PbdClothSimulator::setMesh(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
-  if (V.rows() == 0 || F.rows() == 0) throw InvalidInput(std::string(kWhere) + "setMesh: the mesh is empty");
-  if (!V.allFinite()) throw InvalidInput(std::string(kWhere) + "setMesh: non-finite vertex coordinates");
+  if (V.rows() == 0 || F.rows() == 0) throw InvalidInput(std::string(kSimulatorWhere) + "setMesh: the mesh is empty");
+  if (!V.allFinite()) throw InvalidInput(std::string(kSimulatorWhere) + "setMesh: non-finite vertex coordinates");
   if (F.minCoeff() < 0 || F.maxCoeff() >= V.rows())
-    throw InvalidInput(std::string(kWhere) + "setMesh: a face index is out of range (" + std::to_string(V.rows()) + " vertices)");
+    throw InvalidInput(std::string(kSimulatorWhere) + "setMesh: a face index is out of range (" + std::to_string(V.rows()) + " vertices)");
   for (Eigen::Index f = 0; f < F.rows(); ++f)
     if (F(f, 0) == F(f, 1) || F(f, 1) == F(f, 2) || F(f, 0) == F(f, 2))
-      throw InvalidInput(std::string(kWhere) + "setMesh: face " + std::to_string(f) + " repeats a vertex; remove degenerate faces first");
+      throw InvalidInput(std::string(kSimulatorWhere) + "setMesh: face " + std::to_string(f) + " repeats a vertex; remove degenerate faces first");
   rest_ = V;
   F_ = F;
   const Eigen::Index n = V.rows();
@@ -168,11 +168,11 @@ void PbdClothSimulator::buildTethers() {
 
 void PbdClothSimulator::setClothness(const Eigen::VectorXd& delta) {
   if (delta.size() != rest_.rows())
-    throw InvalidInput(std::string(kWhere) + "setClothness: " + std::to_string(delta.size()) + " values for " +
+    throw InvalidInput(std::string(kSimulatorWhere) + "setClothness: " + std::to_string(delta.size()) + " values for " +
                        std::to_string(rest_.rows()) + " vertices (call setMesh first)");
   for (Eigen::Index i = 0; i < delta.size(); ++i)
     if (!(delta(i) >= 0 && delta(i) <= 1))
-      throw InvalidInput(std::string(kWhere) + "setClothness: vertex " + std::to_string(i) + " has clothness " +
+      throw InvalidInput(std::string(kSimulatorWhere) + "setClothness: vertex " + std::to_string(i) + " has clothness " +
                          std::to_string(delta(i)) + ", expected a value in [0, 1]");
   delta_ = delta;
   k_blend_.clear();
@@ -182,9 +182,9 @@ void PbdClothSimulator::setClothness(const Eigen::VectorXd& delta) {
 
 void PbdClothSimulator::setRegions(const Eigen::VectorXi& region) {
   if (region.size() != rest_.rows())
-    throw InvalidInput(std::string(kWhere) + "setRegions: " + std::to_string(region.size()) + " labels for " +
+    throw InvalidInput(std::string(kSimulatorWhere) + "setRegions: " + std::to_string(region.size()) + " labels for " +
                        std::to_string(rest_.rows()) + " vertices");
-  if (region.size() && region.minCoeff() < 0) throw InvalidInput(std::string(kWhere) + "setRegions: labels must be ≥ 0");
+  if (region.size() && region.minCoeff() < 0) throw InvalidInput(std::string(kSimulatorWhere) + "setRegions: labels must be ≥ 0");
   region_ = region;
   for (auto& b : bend_) b.region = std::max(region_(b.a), region_(b.b));
   const int k = region.size() ? region.maxCoeff() + 1 : 1;
@@ -192,9 +192,9 @@ void PbdClothSimulator::setRegions(const Eigen::VectorXi& region) {
 }
 
 void PbdClothSimulator::setMaterial(const ClothMaterial& m, int region) {
-  if (region < 0) throw InvalidInput(std::string(kWhere) + "setMaterial: region must be ≥ 0");
+  if (region < 0) throw InvalidInput(std::string(kSimulatorWhere) + "setMaterial: region must be ≥ 0");
   if (!(m.d_n >= 0) || !(m.d_t >= 0) || !(m.k_bend >= 0 && m.k_bend <= 1))
-    throw InvalidInput(std::string(kWhere) + "setMaterial: need d_n ≥ 0, d_t ≥ 0 and k_bend in [0, 1] (got " +
+    throw InvalidInput(std::string(kSimulatorWhere) + "setMaterial: need d_n ≥ 0, d_t ≥ 0 and k_bend in [0, 1] (got " +
                        std::to_string(m.d_n) + ", " + std::to_string(m.d_t) + ", " + std::to_string(m.k_bend) + ")");
   if (int(materials_.size()) <= region) materials_.resize(std::size_t(region + 1), materials_.front());
   materials_[std::size_t(region)] = m;
@@ -210,9 +210,9 @@ void PbdClothSimulator::setSettings(const PbdSettings& s) {
 }
 
 void PbdClothSimulator::reset(const Eigen::MatrixX3d& P) {
-  if (P.rows() != rest_.rows()) throw InvalidInput(std::string(kWhere) + "reset: " + std::to_string(P.rows()) + " positions for " +
+  if (P.rows() != rest_.rows()) throw InvalidInput(std::string(kSimulatorWhere) + "reset: " + std::to_string(P.rows()) + " positions for " +
                                                    std::to_string(rest_.rows()) + " vertices");
-  if (!P.allFinite()) throw InvalidInput(std::string(kWhere) + "reset: non-finite positions");
+  if (!P.allFinite()) throw InvalidInput(std::string(kSimulatorWhere) + "reset: non-finite positions");
   const Eigen::Index n = P.rows();
   pos_.resize(std::size_t(n));
   vel_.assign(std::size_t(n), Eigen::Vector3d::Zero());
@@ -226,9 +226,9 @@ void PbdClothSimulator::reset(const Eigen::MatrixX3d& P) {
 void PbdClothSimulator::reset(const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& U, const Eigen::MatrixX3d& targets,
                               const std::vector<RoundCone>& proxies) {
   if (U.rows() != P.rows() || targets.rows() != P.rows())
-    throw InvalidInput(std::string(kWhere) + "reset: " + std::to_string(U.rows()) + " velocities and " + std::to_string(targets.rows()) +
+    throw InvalidInput(std::string(kSimulatorWhere) + "reset: " + std::to_string(U.rows()) + " velocities and " + std::to_string(targets.rows()) +
                        " targets for " + std::to_string(P.rows()) + " positions");
-  if (!U.allFinite() || !targets.allFinite()) throw InvalidInput(std::string(kWhere) + "reset: non-finite velocities or targets");
+  if (!U.allFinite() || !targets.allFinite()) throw InvalidInput(std::string(kSimulatorWhere) + "reset: non-finite velocities or targets");
   reset(P);
   for (Eigen::Index i = 0; i < U.rows(); ++i) vel_[std::size_t(i)] = delta_(i) > 0 ? Eigen::Vector3d(U.row(i).transpose()) : Eigen::Vector3d::Zero();
   targets_prev_ = targets;
@@ -237,15 +237,15 @@ void PbdClothSimulator::reset(const Eigen::MatrixX3d& P, const Eigen::MatrixX3d&
 }
 
 void PbdClothSimulator::step(const Eigen::MatrixX3d& targets_in, const std::vector<RoundCone>& proxies) {
-  if (x_.rows() == 0) throw InvalidInput(std::string(kWhere) + "step: call setMesh first");
+  if (x_.rows() == 0) throw InvalidInput(std::string(kSimulatorWhere) + "step: call setMesh first");
   const bool have_targets = targets_in.rows() > 0;
   if (have_targets && targets_in.rows() != x_.rows())
-    throw InvalidInput(std::string(kWhere) + "step: " + std::to_string(targets_in.rows()) + " targets for " + std::to_string(x_.rows()) +
+    throw InvalidInput(std::string(kSimulatorWhere) + "step: " + std::to_string(targets_in.rows()) + " targets for " + std::to_string(x_.rows()) +
                        " vertices");
-  if (have_targets && !targets_in.allFinite()) throw InvalidInput(std::string(kWhere) + "step: the targets contain NaN or Inf");
+  if (have_targets && !targets_in.allFinite()) throw InvalidInput(std::string(kSimulatorWhere) + "step: the targets contain NaN or Inf");
   for (std::size_t k = 0; k < proxies.size(); ++k)
     if (!proxies[k].a.allFinite() || !proxies[k].b.allFinite() || !(proxies[k].ra >= 0) || !(proxies[k].rb >= 0))
-      throw InvalidInput(std::string(kWhere) + "step: proxy " + std::to_string(k) + " has non-finite ends or a negative radius");
+      throw InvalidInput(std::string(kSimulatorWhere) + "step: proxy " + std::to_string(k) + " has non-finite ends or a negative radius");
   const Eigen::MatrixX3d& targets = have_targets ? targets_in : x_;
   if (proxies_prev_.size() != proxies.size()) proxies_prev_ = proxies;
   const int ns = settings_.substeps;

@@ -46,7 +46,7 @@ void StereoFusionEngine::setOptions(const StereoFusionOptions& o) {
 
 namespace {
 
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr float kNoDepth = std::numeric_limits<float>::quiet_NaN();
 
 struct MapPoints {
   const ViewDepth* view = nullptr;
@@ -67,7 +67,7 @@ MapPoints back_project(const Camera& cam, const ViewDepth& v) {
   m.w = v.depth.cols;
   m.h = v.depth.rows;
   const std::size_t n = static_cast<std::size_t>(m.w) * m.h;
-  m.X.assign(n, Eigen::Vector3f::Constant(kNaN));
+  m.X.assign(n, Eigen::Vector3f::Constant(kNoDepth));
   m.N.assign(n, Eigen::Vector3f::Zero());
   for (int y = 0; y < m.h; ++y)
     for (int x = 0; x < m.w; ++x) {
@@ -89,7 +89,7 @@ MapPoints back_project(const Camera& cam, const ViewDepth& v) {
         if (a && b) return at(xb, yb) - at(xa, ya);
         if (b) return at(xb, yb) - p;
         if (a) return p - at(xa, ya);
-        return Eigen::Vector3f::Constant(kNaN);
+        return Eigen::Vector3f::Constant(kNoDepth);
       };
       const Eigen::Vector3f du = diff(1, 0), dv = diff(0, 1);
       if (std::isnan(du.x()) || std::isnan(dv.x())) continue;

@@ -16,7 +16,7 @@ namespace tbsp::stereo_detail {
 
 namespace {
 
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr float kNoDisparity = std::numeric_limits<float>::quiet_NaN();
 
 cv::Mat to_cv(const Eigen::Matrix3d& m) {
   cv::Mat r;
@@ -195,8 +195,8 @@ PairDepth match_pair(const Camera& ci, const Camera& cj, int i, int j, const cv:
   const auto t1 = Clock::now();
   const DisparityMap dm = compute_disparity(L, Rr, mo);
   cv::Mat dL = dm.disparity.clone(), dR = dm.right_disparity.clone();
-  if (!mL.empty()) dL.setTo(kNaN, mL < 128);
-  if (!mR.empty()) dR.setTo(kNaN, mR < 128);
+  if (!mL.empty()) dL.setTo(kNoDisparity, mL < 128);
+  if (!mR.empty()) dR.setTo(kNoDisparity, mR < 128);
   out.seconds_match = seconds_since(t1);
 
   // Depth maps in each camera's own grid (at scale s): inverse lookup through the rectification.
@@ -209,7 +209,7 @@ PairDepth match_pair(const Camera& ci, const Camera& cj, int i, int j, const cv:
     v.disparity_min = dmin;
     v.disparity_count = num;
     const int w = std::max(1, static_cast<int>(std::lround(cam.width() * s))), h = std::max(1, static_cast<int>(std::lround(cam.height() * s)));
-    v.depth = cv::Mat(h, w, CV_32F, cv::Scalar(kNaN));
+    v.depth = cv::Mat(h, w, CV_32F, cv::Scalar(kNoDisparity));
     std::vector<cv::Point2f> px;
     px.reserve(static_cast<std::size_t>(w) * h);
     const double sx = static_cast<double>(w) / cam.width(), sy = static_cast<double>(h) / cam.height();
