@@ -4,9 +4,12 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
+#include <functional>
 #include <string>
 #include <vector>
 
+#include "tbsp/core/error.h"
 #include "tbsp/mesh/tri_mesh.h"
 
 namespace tbsp::test {
@@ -51,6 +54,19 @@ inline std::filesystem::path temp_dir(const std::string& name) {
   std::filesystem::remove_all(p);
   std::filesystem::create_directories(p);
   return p;
+}
+
+/// Writes `text` to `p` as it is (binary mode: no newline translation).
+inline void write_text(const std::filesystem::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
+
+/// The message of the tbsp::FileError that `f` throws ("" when it throws none).
+inline std::string file_error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const FileError& e) {
+    return e.what();
+  }
+  return "";
 }
 
 }  // namespace tbsp::test

@@ -20,14 +20,9 @@ std::vector<Camera> some_cameras(bool distortion) {
   }
   return cams;
 }
-void write(const std::filesystem::path& p, const std::string& s) { std::ofstream(p) << s; }
 void expect_same_projection(const Camera& a, const Camera& b) {
   for (const Eigen::Vector3d& X : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.3, -0.2, 0.1), Eigen::Vector3d(-0.4, 0.5, 0.2)})
     EXPECT_LT((a.project(X) - b.project(X)).norm(), 1e-6) << a.name();
-}
-std::string error_of(const std::function<void()>& f) {
-  try { f(); } catch (const FileError& e) { return e.what(); }
-  return "";
 }
 }  // namespace
 
@@ -53,8 +48,8 @@ TEST(CameraIo, ColmapRoundTripWithDistortionAndPixelConvention) {
   for (std::size_t i = 0; i < cams.size(); ++i) expect_same_projection(cams[i], back[i]);
   // A hand-written COLMAP model: the principal point (320, 240) in COLMAP's convention (pixel
   // centres at +0.5) is (319.5, 239.5) in tbsp's.
-  write(dir / "cameras.txt", "# c\n1 SIMPLE_PINHOLE 640 480 500 320 240\n2 RADIAL 640 480 500 320 240 0.1 0.01\n");
-  write(dir / "images.txt", "# i\n1 1 0 0 0 0 0 2 1 a.png\n10 20 0.5 -1 1 5 1\n2 1 0 0 0 0 0 2 2 b.png\n\n");
+  test::write_text(dir / "cameras.txt", "# c\n1 SIMPLE_PINHOLE 640 480 500 320 240\n2 RADIAL 640 480 500 320 240 0.1 0.01\n");
+  test::write_text(dir / "images.txt", "# i\n1 1 0 0 0 0 0 2 1 a.png\n10 20 0.5 -1 1 5 1\n2 1 0 0 0 0 0 2 2 b.png\n\n");
   const auto hand = read_colmap_text(dir.string());
   ASSERT_EQ(hand.size(), 2u);
   EXPECT_EQ(hand[0].name(), "a.png");
@@ -72,8 +67,8 @@ TEST(CameraIo, ProjectionMatrixFormats) {
   std::ostringstream plain;
   plain.precision(17);
   for (int r = 0; r < 3; ++r) plain << P(r, 0) << ' ' << P(r, 1) << ' ' << P(r, 2) << ' ' << P(r, 3) << "\n";
-  write(dir / "a.Pmat.cal", "CONTOUR\n" + plain.str());
-  write(dir / "b.xml", "<?xml version=\"1.0\" ?>\n<camera>\n" + plain.str() + "</camera>\n");
+  test::write_text(dir / "a.Pmat.cal", "CONTOUR\n" + plain.str());
+  test::write_text(dir / "b.xml", "<?xml version=\"1.0\" ?>\n<camera>\n" + plain.str() + "</camera>\n");
   expect_same_projection(c, read_projection_matrix((dir / "a.Pmat.cal").string(), 640, 480));
   expect_same_projection(c, read_projection_matrix((dir / "b.xml").string(), 640, 480));
 }
@@ -93,16 +88,16 @@ TEST(CameraIo, MalformedFilesGiveClearErrors) {
   };
   for (const Case& c : par) {
     const auto f = dir / (std::string(c.name) + "_par.txt");
-    write(f, c.text);
-    const std::string e = error_of([&] { read_middlebury_par(f.string(), 640, 480); });
+    test::write_text(f, c.text);
+    const std::string e = test::file_error_of([&] { read_middlebury_par(f.string(), 640, 480); });
     EXPECT_NE(e, "") << c.name;
     EXPECT_NE(e.find(f.string()), std::string::npos) << c.name << ": " << e;
     EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
   }
   // Image size needed but the image is missing.
-  write(dir / "m_par.txt", "1\n" + good_line);
-  EXPECT_NE(error_of([&] { read_middlebury_par((dir / "m_par.txt").string()); }).find("pass the size"), std::string::npos);
-  EXPECT_NE(error_of([&] { read_middlebury_par((dir / "missing_par.txt").string()); }).find("no such file"), std::string::npos);
+  test::write_text(dir / "m_par.txt", "1\n" + good_line);
+  EXPECT_NE(test::file_error_of([&] { read_middlebury_par((dir / "m_par.txt").string()); }).find("pass the size"), std::string::npos);
+  EXPECT_NE(test::file_error_of([&] { read_middlebury_par((dir / "missing_par.txt").string()); }).find("no such file"), std::string::npos);
 
   const Case pm[] = {{"eleven", "1 2 3 4 5 6 7 8 9 10 11\n", "exactly 12"},
                      {"word", "1 2 3 4 five 6 7 8 9 10 11 12\n", "not a number"},
@@ -110,8 +105,8 @@ TEST(CameraIo, MalformedFilesGiveClearErrors) {
                      {"inf", "1 0 0 0 0 1 0 0 0 0 1 inf\n", "not finite"}};
   for (const Case& c : pm) {
     const auto f = dir / (std::string(c.name) + ".P");
-    write(f, c.text);
-    const std::string e = error_of([&] { read_projection_matrix(f.string(), 10, 10); });
+    test::write_text(f, c.text);
+    const std::string e = test::file_error_of([&] { read_projection_matrix(f.string(), 10, 10); });
     EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
     EXPECT_NE(e.find(f.string()), std::string::npos) << c.name << ": " << e;
   }
@@ -123,23 +118,23 @@ TEST(CameraIo, MalformedFilesGiveClearErrors) {
                        {"size", "1 PINHOLE -640 480 1 2 3 4\n", "positive integers"},
                        {"nan", "1 PINHOLE 640 480 nan 2 3 4\n", "finite"}};
   for (const Case& c : cams) {
-    write(cm / "cameras.txt", c.text);
-    write(cm / "images.txt", "1 1 0 0 0 0 0 0 1 a.png\n\n");
-    const std::string e = error_of([&] { read_colmap_text(cm.string()); });
+    test::write_text(cm / "cameras.txt", c.text);
+    test::write_text(cm / "images.txt", "1 1 0 0 0 0 0 0 1 a.png\n\n");
+    const std::string e = test::file_error_of([&] { read_colmap_text(cm.string()); });
     EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
     EXPECT_NE(e.find("cameras.txt:1"), std::string::npos) << c.name << ": " << e;
   }
-  write(cm / "cameras.txt", "1 PINHOLE 640 480 500 500 320 240\n");
+  test::write_text(cm / "cameras.txt", "1 PINHOLE 640 480 500 500 320 240\n");
   const Case imgs[] = {{"cam", "1 1 0 0 0 0 0 0 7 a.png\n\n", "not defined"},
                        {"quat", "1 2 0 0 0 0 0 0 1 a.png\n\n", "quaternion"},
                        {"fields", "1 1 0 0 0 0 0 1 a.png\n\n", "10 fields"}};
   for (const Case& c : imgs) {
-    write(cm / "images.txt", c.text);
-    const std::string e = error_of([&] { read_colmap_text(cm.string()); });
+    test::write_text(cm / "images.txt", c.text);
+    const std::string e = test::file_error_of([&] { read_colmap_text(cm.string()); });
     EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
   }
   std::filesystem::remove(cm / "images.txt");
-  EXPECT_NE(error_of([&] { read_colmap_text(cm.string()); }).find("no such file"), std::string::npos);
+  EXPECT_NE(test::file_error_of([&] { read_colmap_text(cm.string()); }).find("no such file"), std::string::npos);
 }
 
 // The Tsinghua dome format (WD2 / lkB calibParamsI.txt): index, K with skew, k1 k2, [R|t].
@@ -147,7 +142,7 @@ TEST(CameraIo, DomeCalibrationReadsBlocksAndNamesErrors) {
   const auto dir = test::temp_dir("domecal");
   const std::string b0 = "0\n900 -1.5 520\n0.0 898 384\n0 0 1\n-0.04 0.06\n1 0 0 0\n0 1 0 0\n0 0 1 0\n\n";
   const std::string b1 = "1\n899 -1.0 506\n0.0 898 395\n0 0 1\n-0.03 0.05\n0 0 1 -7.5\n0 1 0 0.1\n-1 0 0 1.5\n\n";
-  write(dir / "ok.txt", b0 + b1);
+  test::write_text(dir / "ok.txt", b0 + b1);
   const auto cams = read_dome_calibration((dir / "ok.txt").string(), 1024, 768);
   ASSERT_EQ(cams.size(), 2u);
   EXPECT_EQ(cams[0].name(), "cam0");
@@ -173,20 +168,20 @@ TEST(CameraIo, DomeCalibrationReadsBlocksAndNamesErrors) {
   };
   for (const Case& c : bad) {
     const auto f = dir / (std::string(c.name) + ".txt");
-    write(f, c.text);
-    const std::string e = error_of([&] { read_dome_calibration(f.string(), 1024, 768); });
+    test::write_text(f, c.text);
+    const std::string e = test::file_error_of([&] { read_dome_calibration(f.string(), 1024, 768); });
     EXPECT_NE(e.find(f.string()), std::string::npos) << c.name << ": " << e;
     EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": " << e;
   }
   EXPECT_THROW(read_dome_calibration((dir / "ok.txt").string(), 0, 768), InvalidInput);
-  EXPECT_NE(error_of([&] { read_dome_calibration((dir / "missing.txt").string(), 1024, 768); }).find("missing.txt"), std::string::npos);
+  EXPECT_NE(test::file_error_of([&] { read_dome_calibration((dir / "missing.txt").string(), 1024, 768); }).find("missing.txt"), std::string::npos);
 }
 
 TEST(CameraIo, MiddleburyStereoCalibReadsThe2014Format) {
   const auto dir = test::temp_dir("mbcalib");
   const auto p = (dir / "calib.txt").string();
   // The Adirondack calib.txt of Middlebury 2014 (full size).
-  write(p, "cam0=[4161.221 0 1445.577; 0 4161.221 984.686; 0 0 1]\ncam1=[4161.221 0 1654.636; 0 4161.221 984.686; 0 0 1]\n"
+  test::write_text(p, "cam0=[4161.221 0 1445.577; 0 4161.221 984.686; 0 0 1]\ncam1=[4161.221 0 1654.636; 0 4161.221 984.686; 0 0 1]\n"
            "doffs=209.059\nbaseline=176.252\nwidth=2880\nheight=1988\nndisp=280\nisint=0\nvmin=33\nvmax=218\ndyavg=0.187\ndymax=0.546\n");
   const RectifiedPairCalibration c = read_middlebury_stereo_calib(p);
   EXPECT_DOUBLE_EQ(c.f, 4161.221);
@@ -204,8 +199,8 @@ TEST(CameraIo, MalformedStereoCalibGivesClearErrors) {
   const auto p = (dir / "calib.txt").string();
   const std::string cam0 = "cam0=[100 0 50; 0 100 40; 0 0 1]\n", cam1 = "cam1=[100 0 60; 0 100 40; 0 0 1]\n";
   auto err = [&](const std::string& text) {
-    write(p, text);
-    return error_of([&] { read_middlebury_stereo_calib(p); });
+    test::write_text(p, text);
+    return test::file_error_of([&] { read_middlebury_stereo_calib(p); });
   };
   EXPECT_NE(err(cam0 + cam1).find("missing baseline"), std::string::npos);
   EXPECT_NE(err(cam0 + "baseline=1\n").find("missing cam1"), std::string::npos);
@@ -219,8 +214,8 @@ TEST(CameraIo, MalformedStereoCalibGivesClearErrors) {
   EXPECT_NE(err(cam0 + "cam1=[90 0 60; 0 90 40; 0 0 1]\nbaseline=1\n").find("not rectified"), std::string::npos);
   EXPECT_NE(err(cam0 + cam1 + "baseline=1\nwidth=2.5\n").find("non-negative integer"), std::string::npos);
   EXPECT_NE(err("no equals sign\n").find(":1: expected 'key=value'"), std::string::npos);
-  EXPECT_NE(error_of([&] { read_middlebury_stereo_calib((dir / "none.txt").string()); }).find("none.txt"), std::string::npos);
+  EXPECT_NE(test::file_error_of([&] { read_middlebury_stereo_calib((dir / "none.txt").string()); }).find("none.txt"), std::string::npos);
   // Valid without doffs: derived from the principal points.
-  write(p, cam0 + cam1 + "baseline=2\n");
+  test::write_text(p, cam0 + cam1 + "baseline=2\n");
   EXPECT_DOUBLE_EQ(read_middlebury_stereo_calib(p).doffs, 10.0);
 }

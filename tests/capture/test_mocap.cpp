@@ -10,11 +10,6 @@
 using namespace tbsp;
 
 namespace {
-void write_mocap(const std::filesystem::path& p, const std::string& s) { std::ofstream(p, std::ios::binary) << s; }
-std::string mocap_error_of(const std::function<void()>& f) {
-  try { f(); } catch (const FileError& e) { return e.what(); }
-  return "";
-}
 struct Case { const char* name; std::string text; const char* expect; };
 // Writes each case to DIR/NAME.EXT, reads it with `read`, and expects a FileError naming the
 // file and containing the expected phrase.
@@ -22,8 +17,8 @@ template <typename Read>
 void expect_file_errors(const std::filesystem::path& dir, const char* ext, const std::vector<Case>& cases, Read read) {
   for (const Case& c : cases) {
     const auto f = dir / (std::string(c.name) + ext);
-    write_mocap(f, c.text);
-    const std::string e = mocap_error_of([&] { read(f.string()); });
+    test::write_text(f, c.text);
+    const std::string e = test::file_error_of([&] { read(f.string()); });
     EXPECT_NE(e, "") << c.name;
     EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": '" << e << "'";
     EXPECT_NE(e.find(f.string()), std::string::npos) << c.name;
@@ -143,12 +138,12 @@ TEST(Trc, MalformedFilesGiveClearErrors) {
       {"rate", replace("100\t100\t4", "-1\t100\t4"), "DataRate"},
       {"empty", "", "file ends"},
   }, [](const std::string& f) { read_trc(f); });
-  EXPECT_NE(mocap_error_of([&] { read_trc((dir / "missing.trc").string()); }).find("no such file"), std::string::npos);
+  EXPECT_NE(test::file_error_of([&] { read_trc((dir / "missing.trc").string()); }).find("no such file"), std::string::npos);
 }
 
 TEST(C3d, MinimalIntelFloatFileParses) {
   const auto dir = test::temp_dir("c3d");
-  write_mocap(dir / "a.c3d", make_c3d(3, 4, -1.0f));
+  test::write_text(dir / "a.c3d", make_c3d(3, 4, -1.0f));
   const MarkerTrajectories m = read_c3d((dir / "a.c3d").string());
   EXPECT_EQ(m.numMarkers(), 3);
   EXPECT_EQ(m.numFrames(), 4);
@@ -189,7 +184,7 @@ TEST(C3d, MalformedFilesGiveClearErrors) {
 
 TEST(Bvh, RoundTripAndForwardKinematics) {
   const auto dir = test::temp_dir("bvh");
-  write_mocap(dir / "a.bvh",
+  test::write_text(dir / "a.bvh",
         "HIERARCHY\nROOT hip\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
         " JOINT knee\n {\n  OFFSET 0 -10 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 -8 0\n  }\n }\n}\n"
         "MOTION\nFrames: 2\nFrame Time: 0.04\n0 100 0 0 0 0 0 0 0\n5 100 0 90 0 0 0 0 0\n");
@@ -230,6 +225,6 @@ TEST(Bvh, MalformedFilesGiveClearErrors) {
   // Deep nesting does not overflow the stack.
   std::string deep = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 0\n";
   for (int i = 0; i < 5000; ++i) deep += "JOINT j\n{\nOFFSET 0 0 0\nCHANNELS 0\n";
-  write_mocap(dir / "deep.bvh", deep);
-  EXPECT_NE(mocap_error_of([&] { read_bvh((dir / "deep.bvh").string()); }).find("deeper"), std::string::npos);
+  test::write_text(dir / "deep.bvh", deep);
+  EXPECT_NE(test::file_error_of([&] { read_bvh((dir / "deep.bvh").string()); }).find("deeper"), std::string::npos);
 }

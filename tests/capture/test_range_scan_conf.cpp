@@ -18,16 +18,6 @@ std::string write_conf_file(const std::filesystem::path& dir, const std::string&
   return p.string();
 }
 
-// The message of the FileError `f` throws ("" when it does not throw).
-template <typename F>
-std::string error_of(F f) {
-  try {
-    f();
-  } catch (const FileError& e) {
-    return e.what();
-  }
-  return "";
-}
 }  // namespace
 
 TEST(RangeScanConf, ReadsPosesWithTheInverseRotation) {
@@ -54,7 +44,7 @@ TEST(RangeScanConf, ReadsPosesWithTheInverseRotation) {
   EXPECT_NEAR((P.row(0) - Eigen::RowVector3d(5, 6, 7)).norm(), 0, 1e-6);
   EXPECT_NEAR((P.row(2) - Eigen::RowVector3d(1, 1, 3)).norm(), 0, 1e-6);
   EXPECT_EQ(read_registered_range_scans(conf).rows(), 3);
-  const std::string msg = error_of([&] { read_registered_range_scans(conf, {"c.ply"}); });
+  const std::string msg = test::file_error_of([&] { read_registered_range_scans(conf, {"c.ply"}); });
   EXPECT_NE(msg.find("c.ply"), std::string::npos) << msg;
   EXPECT_NE(msg.find("a.ply, b.ply"), std::string::npos) << msg;
 }
@@ -74,12 +64,12 @@ TEST(RangeScanConf, RefusesMalformedLines) {
                         Case{"# nothing\n", "no 'bmesh"},
                         Case{"", "no 'bmesh"}}) {
     const std::string path = write_conf_file(dir, "bad.conf", c.text);
-    const std::string msg = error_of([&] { read_range_scan_conf(path); });
+    const std::string msg = test::file_error_of([&] { read_range_scan_conf(path); });
     EXPECT_NE(msg.find(c.expect), std::string::npos) << "input: " << c.text << "\nmessage: " << msg;
     EXPECT_NE(msg.find("bad.conf"), std::string::npos) << msg;
   }
-  EXPECT_NE(error_of([&] { read_range_scan_conf((dir / "missing.conf").string()); }).find("no such file"), std::string::npos);
+  EXPECT_NE(test::file_error_of([&] { read_range_scan_conf((dir / "missing.conf").string()); }).find("no such file"), std::string::npos);
   // a listed scan that is not there: the reader's error names it
   const std::string conf = write_conf_file(dir, "ok.conf", "bmesh gone.ply 0 0 0 0 0 0 1\n");
-  EXPECT_NE(error_of([&] { read_registered_range_scans(conf); }).find("gone.ply"), std::string::npos);
+  EXPECT_NE(test::file_error_of([&] { read_registered_range_scans(conf); }).find("gone.ply"), std::string::npos);
 }

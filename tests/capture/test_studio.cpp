@@ -41,11 +41,6 @@ Studio small_studio(const std::filesystem::path& dir, int ncam = 3, int nframes 
   s.ground_truth = "gt/%03d.ply";
   return s;
 }
-std::string studio_error_of(const std::function<void()>& f) {
-  try { f(); } catch (const FileError& e) { return e.what(); }
-  return "";
-}
-void write_studio_file(const std::filesystem::path& p, const std::string& s) { std::ofstream(p) << s; }
 }  // namespace
 
 TEST(Studio, FramePatterns) {
@@ -114,14 +109,14 @@ TEST(Studio, StreamsFramesAndListsMissingFiles) {
   StudioFrameStream broken(s, {});
   EXPECT_TRUE(broken.next(fr));
   EXPECT_TRUE(broken.next(fr));
-  const std::string e = studio_error_of([&] { broken.next(fr); });
+  const std::string e = test::file_error_of([&] { broken.next(fr); });
   EXPECT_NE(e.find("cam1/0012.png"), std::string::npos) << e;
   EXPECT_NE(e.find("missing"), std::string::npos) << e;
   // An image of the wrong size is reported.
   cv::imwrite(s.imagePath(0, 10), cv::Mat(10, 10, CV_8UC3));
   EXPECT_NE(check_studio(s).summary().find("10x10"), std::string::npos);
   StudioFrameStream sized(s, {});
-  EXPECT_NE(studio_error_of([&] { sized.next(fr); }).find("differs from the calibrated"), std::string::npos);
+  EXPECT_NE(test::file_error_of([&] { sized.next(fr); }).find("differs from the calibrated"), std::string::npos);
 }
 
 TEST(Studio, VideoCamerasStream) {
@@ -174,16 +169,16 @@ TEST(Studio, MalformedFilesGiveClearErrors) {
   };
   for (const Case& c : cases) {
     const auto f = dir / (std::string(c.name) + ".yaml");
-    write_studio_file(f, c.text);
-    const std::string e = studio_error_of([&] { read_studio(f.string()); });
+    test::write_text(f, c.text);
+    const std::string e = test::file_error_of([&] { read_studio(f.string()); });
     EXPECT_NE(e.find(c.expect), std::string::npos) << c.name << ": '" << e << "'";
     EXPECT_NE(e.find(f.string()), std::string::npos) << c.name << ": '" << e << "'";
   }
   // Line numbers point at the offending camera.
-  write_studio_file(dir / "line.yaml", head + cam + "  - name: b\n    width: 32\n    height: 24\n    K: [100,0,16,0,-100,12,0,0,1]\n    R: [1,0,0,0,1,0,0,0,1]\n    t: [0,0,2]\n");
-  EXPECT_NE(studio_error_of([&] { read_studio((dir / "line.yaml").string()); }).find("line.yaml:10:"), std::string::npos)
-      << studio_error_of([&] { read_studio((dir / "line.yaml").string()); });
-  EXPECT_NE(studio_error_of([&] { read_studio((dir / "missing.yaml").string()); }).find("no such file"), std::string::npos);
-  write_studio_file(dir / "empty.yaml", "");
-  EXPECT_NE(studio_error_of([&] { read_studio((dir / "empty.yaml").string()); }), "");
+  test::write_text(dir / "line.yaml", head + cam + "  - name: b\n    width: 32\n    height: 24\n    K: [100,0,16,0,-100,12,0,0,1]\n    R: [1,0,0,0,1,0,0,0,1]\n    t: [0,0,2]\n");
+  EXPECT_NE(test::file_error_of([&] { read_studio((dir / "line.yaml").string()); }).find("line.yaml:10:"), std::string::npos)
+      << test::file_error_of([&] { read_studio((dir / "line.yaml").string()); });
+  EXPECT_NE(test::file_error_of([&] { read_studio((dir / "missing.yaml").string()); }).find("no such file"), std::string::npos);
+  test::write_text(dir / "empty.yaml", "");
+  EXPECT_NE(test::file_error_of([&] { read_studio((dir / "empty.yaml").string()); }), "");
 }
