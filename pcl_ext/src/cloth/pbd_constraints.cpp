@@ -115,7 +115,7 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
   // only slower partners, so one fast vertex does not widen everybody's search.
   std::vector<double> sorted_travel(travel);
   std::nth_element(sorted_travel.begin(), sorted_travel.begin() + std::ptrdiff_t(n * 9 / 10), sorted_travel.end());
-  // cell: the search of 90 % of the vertices covers 3×3×3 cells; the fastest one at most 9×9×9
+  // cell: the search of 90 % of the vertices stays within 3×3×3 cells; the fastest one's within 9×9×9
   const double tmax = *std::max_element(travel.begin(), travel.end());
   const double cell = std::max(s + 2 * sorted_travel[n * 9 / 10], (s + 2 * tmax) / 4);
   // hashed uniform grid, counting sort: bucket b holds its vertices in increasing index order
@@ -129,15 +129,27 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
             std::size_t(std::uint32_t(c.z()) * 83492791u)) & (buckets - 1);
   };
   std::vector<Eigen::Vector3i> cells(n);
-  std::vector<int> start(buckets + 1, 0), entries(n);
+  std::vector<int> start(buckets + 1, 0);
   for (std::size_t i = 0; i < n; ++i) {
     cells[i] = coord(pos_[i]);
     ++start[hash(cells[i]) + 1];
   }
   for (std::size_t b = 0; b < buckets; ++b) start[b + 1] += start[b];
+  // each entry carries what the search tests first (its cell, travel and position), so a bucket is
+  // read as one contiguous run instead of three scattered lookups per candidate
+  struct Entry {
+    Eigen::Vector3d p;
+    double travel;
+    Eigen::Vector3i cell;
+    int j;
+  };
+  std::vector<Entry> packed(n);
   {
     std::vector<int> fill(start.begin(), start.end() - 1);
-    for (std::size_t i = 0; i < n; ++i) entries[std::size_t(fill[hash(cells[i])]++)] = int(i);
+    for (std::size_t i = 0; i < n; ++i) {
+      const int q = fill[hash(cells[i])]++;
+      packed[std::size_t(q)] = {pos_[i], travel[i], cells[i], int(i)};
+    }
   }
   const double exclude = 2 * s;  // rest neighbours closer than this are not contacts
   // Parallel over fixed blocks of vertices, each block's pairs in its own list; the lists are
@@ -150,24 +162,46 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
   for (std::size_t b = 0; b < nblocks; ++b) {
     auto& out = found[b];
     for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
-      const double reach = s + 2 * travel[i];
-      const int range = std::max(1, int(std::ceil(reach / cell)));
-      const Eigen::Vector3i& c = cells[i];
-      for (int dx = -range; dx <= range; ++dx)
-        for (int dy = -range; dy <= range; ++dy)
-          for (int dz = -range; dz <= range; ++dz) {
-            const Eigen::Vector3i cc = c + Eigen::Vector3i(dx, dy, dz);
+      const double reach = s + 2 * travel[i], ti = travel[i];
+      const Eigen::Vector3d p = pos_[i];
+      const Eigen::Vector3d r = rest_.row(Eigen::Index(i)).transpose();
+      const bool fixed_i = inv_mass_[i] == 0;
+      // Only the cells the ball of radius `reach` around p reaches (its bounding box, then the
+      // cells whose nearest point is within reach): with `reach` below the cell size that is
+      // ~8 of the 27 cells around p. The margin keeps rounding from dropping a cell that holds
+      // a partner exactly at the reach.
+      const double rm = reach * (1 + 1e-9) + 1e-12;
+      int lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = int(std::floor((p[a] - rm) / cell));
+        hi[a] = int(std::floor((p[a] + rm) / cell));
+      }
+      auto gap = [&](int a, int k) {  // distance from p to cell k along axis a (0 inside)
+        const double g = k < cells[i][a] ? p[a] - (k + 1) * cell : k > cells[i][a] ? k * cell - p[a] : 0.0;
+        return g > 0 ? g * g : 0.0;
+      };
+      for (int x = lo[0]; x <= hi[0]; ++x) {
+        const double gx = gap(0, x);
+        if (gx > rm * rm) continue;
+        for (int y = lo[1]; y <= hi[1]; ++y) {
+          const double gxy = gx + gap(1, y);
+          if (gxy > rm * rm) continue;
+          for (int z = lo[2]; z <= hi[2]; ++z) {
+            if (gxy + gap(2, z) > rm * rm) continue;
+            const Eigen::Vector3i cc(x, y, z);
             const std::size_t h = hash(cc);
-            for (int q = start[h]; q < start[h + 1]; ++q) {
-              const std::size_t j = std::size_t(entries[std::size_t(q)]);
-              if (j == i || cells[j] != cc) continue;
-              if (travel[j] > travel[i] || (travel[j] == travel[i] && j > i)) continue;  // found from j
-              if (inv_mass_[i] == 0 && inv_mass_[j] == 0) continue;
-              if ((pos_[i] - pos_[j]).squaredNorm() > reach * reach) continue;
-              if ((rest_.row(Eigen::Index(i)) - rest_.row(Eigen::Index(j))).squaredNorm() < exclude * exclude) continue;
+            for (const Entry* e = packed.data() + start[h], *end = packed.data() + start[h + 1]; e != end; ++e) {
+              const std::size_t j = std::size_t(e->j);
+              if (j == i || e->cell != cc) continue;
+              if (e->travel > ti || (e->travel == ti && j > i)) continue;  // found from j
+              if ((p - e->p).squaredNorm() > reach * reach) continue;
+              if (fixed_i && inv_mass_[j] == 0) continue;
+              if ((r - rest_.row(Eigen::Index(j)).transpose()).squaredNorm() < exclude * exclude) continue;
               out.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
             }
           }
+        }
+      }
     }
   }
   // sorted (first, second): a counting sort by the first vertex, then each vertex's few partners
