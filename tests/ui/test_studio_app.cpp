@@ -17,6 +17,7 @@ namespace {
 
 using tbsp::test::sample;
 using tbsp::test::temp_dir;
+using tbsp::test::write_text;
 namespace fs = std::filesystem;
 
 struct Proc {
@@ -37,8 +38,6 @@ Proc run(const std::string& exe, const std::string& args, const fs::path& dir) {
 }
 Proc studio(const std::string& args, const fs::path& dir) { return run(TBSP_STUDIO, args, dir); }
 Proc cli(const std::string& args, const fs::path& dir) { return run(TBSP_CLI, args, dir); }
-
-void write(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
 
 struct Fg {
   int n = 0;
@@ -118,7 +117,7 @@ TEST(StudioApp, FitReportShowsTheErrorHeatmap) {
 
 TEST(StudioApp, ScriptedDragEqualsTetdeformAndTheViewKeepsUp) {
   const auto dir = temp_dir("studio_edit");
-  write(dir / "script.json", R"({"actions": [
+  write_text(dir / "script.json", R"({"actions": [
     {"edit": {"mesh": ")" + sample("bumpy_bar.off") + R"(", "tets": 5000}},
     {"select": {"rect": [0, 0, 140, 600]}},
     {"add_handle": "selection"},
@@ -178,13 +177,13 @@ TEST(StudioApp, ScriptedDragEqualsTetdeformAndTheViewKeepsUp) {
 
 TEST(StudioApp, BadInputShowsAMessageAndKeepsTheSession) {
   const auto dir = temp_dir("studio_bad");
-  write(dir / "garbage.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n");
+  write_text(dir / "garbage.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n");
   tbsp::write_mesh((dir / "open.off").string(), tbsp::make_grid(4, 4));  // not closed: cannot be edited
   // two closed tetrahedra sharing one vertex: closed but not a manifold
-  write(dir / "bowtie.off", "OFF\n7 8 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n-1 0 0\n0 -1 0\n0 0 2\n"
+  write_text(dir / "bowtie.off", "OFF\n7 8 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n-1 0 0\n0 -1 0\n0 0 2\n"
                              "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n3 4 5 0\n3 4 0 6\n3 4 6 5\n3 0 5 6\n");
-  write(dir / "bad_handles.json", R"({"handles": [{"vertices": [1, 99999]}]})");
-  write(dir / "script.json", R"({"actions": [
+  write_text(dir / "bad_handles.json", R"({"handles": [{"vertices": [1, 99999]}]})");
+  write_text(dir / "script.json", R"({"actions": [
     {"open": "missing.ply"},
     {"open": "garbage.ply"},
     {"edit": {"mesh": "open.off", "tets": 0}},
@@ -223,16 +222,16 @@ TEST(StudioApp, BadInputShowsAMessageAndKeepsTheSession) {
 
 TEST(StudioApp, MalformedScriptOrArgumentsAreRefusedUpFront) {
   const auto dir = temp_dir("studio_script");
-  write(dir / "s.json", R"({"actions": [{"open": "a.ply"}, {"rotate_everything": 1}]})");
+  write_text(dir / "s.json", R"({"actions": [{"open": "a.ply"}, {"rotate_everything": 1}]})");
   Proc r = studio("--script s.json", dir);
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("actions[1]"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("rotate_everything"), std::string::npos) << r.err;
-  write(dir / "t.json", R"({"actions": [{"drag": {"handle": 0, "translate": [1, 2]}}]})");
+  write_text(dir / "t.json", R"({"actions": [{"drag": {"handle": 0, "translate": [1, 2]}}]})");
   r = studio("--script t.json", dir);
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("translate"), std::string::npos) << r.err;
-  write(dir / "u.json", "{not json");
+  write_text(dir / "u.json", "{not json");
   r = studio("--script u.json", dir);
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("u.json"), std::string::npos) << r.err;
@@ -247,7 +246,7 @@ TEST(StudioApp, StudioCamerasWithImagesAndASequenceOnTheTimeline) {
   const auto dir = temp_dir("studio_seq");
   const Proc g = cli("synth-studio --out studio --cameras 4 --width 200 --height 200 --frames 3 -q", dir);
   ASSERT_EQ(g.rc, 0) << g.err;
-  write(dir / "script.json", R"({"actions": [
+  write_text(dir / "script.json", R"({"actions": [
     {"open": "studio/studio.yaml"},
     {"frame": 2},
     {"screenshot": "studio.png"},
@@ -282,7 +281,7 @@ TEST(StudioApp, StudioCamerasWithImagesAndASequenceOnTheTimeline) {
 
 TEST(StudioApp, SurfaceEditingWithAndWithoutTheRotationFieldEqualsTbspDeform) {
   const auto dir = temp_dir("studio_surface");
-  write(dir / "script.json", R"({"actions": [
+  write_text(dir / "script.json", R"({"actions": [
     {"edit": {"mesh": ")" + sample("bumpy_bar.off") + R"(", "solver": "surface"}},
     {"select": {"rect": [0, 0, 140, 600]}},
     {"add_handle": "selection"},
@@ -332,8 +331,8 @@ TEST(StudioApp, TetdeformAndTextureReportsOpenAsDisplacementMapAndTexturedMesh) 
   cv::Mat img(64, 64, CV_8UC3, cv::Scalar(255, 0, 0));              // BGR: blue ...
   img(cv::Rect(32, 0, 32, 64)).setTo(cv::Scalar(0, 0, 255));        // ... left, red right
   cv::imwrite((dir / "tex.png").string(), img);
-  write(dir / "texture.json", R"({"mesh": "sphere.off", "output": "tex.obj", "image": {"path": "x.png"}, "constraints": 3})");
-  write(dir / "script.json", R"({"actions": [
+  write_text(dir / "texture.json", R"({"mesh": "sphere.off", "output": "tex.obj", "image": {"path": "x.png"}, "constraints": 3})");
+  write_text(dir / "script.json", R"({"actions": [
     {"open": "tet.json"}, {"screenshot": "tet.png"},
     {"open": "texture.json"}, {"camera": {"eye": [0, 0, 5], "focal": [0, 0, 0], "up": [0, 1, 0]}}, {"screenshot": "tex.png.png"}
   ]})");

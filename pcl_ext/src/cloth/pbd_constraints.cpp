@@ -152,6 +152,49 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
     }
   }
   const double exclude = 2 * s;  // rest neighbours closer than this are not contacts
+  // The pairs vertex i finds (partners slower than it, within its reach, not rest neighbours).
+  auto search = [&](std::size_t i, std::vector<std::pair<int, int>>& out) {
+    const double reach = s + 2 * travel[i], ti = travel[i];
+    const Eigen::Vector3d p = pos_[i];
+    const Eigen::Vector3d r = rest_.row(Eigen::Index(i)).transpose();
+    const bool fixed_i = inv_mass_[i] == 0;
+    // Only the cells the ball of radius `reach` around p reaches (its bounding box, then the
+    // cells whose nearest point is within reach): on the bench's skirt 13 cells per vertex on
+    // average instead of 27-125. The margin keeps rounding from dropping a cell that holds a
+    // partner exactly at the reach.
+    const double rm = reach * (1 + 1e-9) + 1e-12, rm2 = rm * rm;
+    int lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = int(std::floor((p[a] - rm) / cell));
+      hi[a] = int(std::floor((p[a] + rm) / cell));
+    }
+    auto gap = [&](int a, int k) {  // squared distance from p to cell k along axis a (0 inside)
+      const double g = k < cells[i][a] ? p[a] - (k + 1) * cell : k > cells[i][a] ? k * cell - p[a] : 0.0;
+      return g > 0 ? g * g : 0.0;
+    };
+    auto visit = [&](const Eigen::Vector3i& cc) {
+      const std::size_t h = hash(cc);
+      for (const Entry* e = packed.data() + start[h], *end = packed.data() + start[h + 1]; e != end; ++e) {
+        const std::size_t j = std::size_t(e->j);
+        if (j == i || e->cell != cc) continue;
+        if (e->travel > ti || (e->travel == ti && j > i)) continue;  // found from j
+        if ((p - e->p).squaredNorm() > reach * reach) continue;
+        if (fixed_i && inv_mass_[j] == 0) continue;
+        if ((r - rest_.row(Eigen::Index(j)).transpose()).squaredNorm() < exclude * exclude) continue;
+        out.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
+      }
+    };
+    for (int x = lo[0]; x <= hi[0]; ++x) {
+      const double gx = gap(0, x);
+      if (gx > rm2) continue;
+      for (int y = lo[1]; y <= hi[1]; ++y) {
+        const double gxy = gx + gap(1, y);
+        if (gxy > rm2) continue;
+        for (int z = lo[2]; z <= hi[2]; ++z)
+          if (gxy + gap(2, z) <= rm2) visit(Eigen::Vector3i(x, y, z));
+      }
+    }
+  };
   // Parallel over fixed blocks of vertices, each block's pairs in its own list; the lists are
   // joined in block order and sorted, so the pairs (and the order projectSelf visits them in)
   // do not depend on the thread count.
@@ -159,51 +202,8 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
   const std::size_t nblocks = (n + kBlock - 1) / kBlock;
   std::vector<std::vector<std::pair<int, int>>> found(nblocks);
 #pragma omp parallel for schedule(dynamic, 1) if (n >= kParallelMin)
-  for (std::size_t b = 0; b < nblocks; ++b) {
-    auto& out = found[b];
-    for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
-      const double reach = s + 2 * travel[i], ti = travel[i];
-      const Eigen::Vector3d p = pos_[i];
-      const Eigen::Vector3d r = rest_.row(Eigen::Index(i)).transpose();
-      const bool fixed_i = inv_mass_[i] == 0;
-      // Only the cells the ball of radius `reach` around p reaches (its bounding box, then the
-      // cells whose nearest point is within reach): on the bench's skirt 13 cells per vertex on
-      // average instead of 27-125. The margin keeps rounding from dropping a cell that holds a
-      // partner exactly at the reach.
-      const double rm = reach * (1 + 1e-9) + 1e-12;
-      int lo[3], hi[3];
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = int(std::floor((p[a] - rm) / cell));
-        hi[a] = int(std::floor((p[a] + rm) / cell));
-      }
-      auto gap = [&](int a, int k) {  // distance from p to cell k along axis a (0 inside)
-        const double g = k < cells[i][a] ? p[a] - (k + 1) * cell : k > cells[i][a] ? k * cell - p[a] : 0.0;
-        return g > 0 ? g * g : 0.0;
-      };
-      for (int x = lo[0]; x <= hi[0]; ++x) {
-        const double gx = gap(0, x);
-        if (gx > rm * rm) continue;
-        for (int y = lo[1]; y <= hi[1]; ++y) {
-          const double gxy = gx + gap(1, y);
-          if (gxy > rm * rm) continue;
-          for (int z = lo[2]; z <= hi[2]; ++z) {
-            if (gxy + gap(2, z) > rm * rm) continue;
-            const Eigen::Vector3i cc(x, y, z);
-            const std::size_t h = hash(cc);
-            for (const Entry* e = packed.data() + start[h], *end = packed.data() + start[h + 1]; e != end; ++e) {
-              const std::size_t j = std::size_t(e->j);
-              if (j == i || e->cell != cc) continue;
-              if (e->travel > ti || (e->travel == ti && j > i)) continue;  // found from j
-              if ((p - e->p).squaredNorm() > reach * reach) continue;
-              if (fixed_i && inv_mass_[j] == 0) continue;
-              if ((r - rest_.row(Eigen::Index(j)).transpose()).squaredNorm() < exclude * exclude) continue;
-              out.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
-            }
-          }
-        }
-      }
-    }
-  }
+  for (std::size_t b = 0; b < nblocks; ++b)
+    for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) search(i, found[b]);
   // sorted (first, second): a counting sort by the first vertex, then each vertex's few partners
   // sorted (the same order as sorting the whole list, which took a tenth of a simulation)
   std::vector<int> first_start(n + 1, 0);
