@@ -1,11 +1,13 @@
 // The pose step of PerformanceCapture (internal: pcl_ext/src/multiview/capture_pose.h): the
 // normal equations assembled by BLAS rank-k updates against the textbook sum, the handle solve
-// recovering a known handle move, and the rim matches its silhouette constraints come from.
+// recovering a known handle move, the rim matches its silhouette constraints come from, and
+// the mask gradient and overlap measures those use.
 #include <gtest/gtest.h>
 
 #include <random>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "capture_pose.h"
 #include "silhouette_match.h"
@@ -131,4 +133,55 @@ TEST(RimMatch, ExactMeshHasNoOffsetAndAScaledOneIsPulledBack) {
     EXPECT_NEAR(shift, -excess, 1.5) << "vertex " << m.vertex;
   }
   EXPECT_NEAR(mean, -excess, 0.25);
+}
+
+// The point-wise mask gradient equals OpenCV's whole-image GaussianBlur (5x5, σ 1.2) + Sobel
+// (the filters it replaces) at every pixel, the image borders (reflect-101) included.
+TEST(RimMatch, PointwiseMaskGradientEqualsTheWholeImageFilters) {
+  cv::Mat mask(90, 120, CV_8U, cv::Scalar(0));
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> u(0, 119);
+  for (int i = 0; i < 12; ++i) {  // blobs, some across the borders
+    const int cx = u(rng), cy = u(rng) * 90 / 120, r = 3 + u(rng) % 15;
+    for (int y = std::max(0, cy - r); y < std::min(90, cy + r + 1); ++y)
+      for (int x = std::max(0, cx - r); x < std::min(120, cx + r + 1); ++x)
+        if ((x - cx) * (x - cx) + (y - cy) * (y - cy) <= r * r) mask.at<std::uint8_t>(y, x) = 255;
+  }
+  cv::Mat f, b, gx, gy;
+  mask.convertTo(f, CV_32F, 1.0 / 255.0);
+  cv::GaussianBlur(f, b, cv::Size(5, 5), 1.2);
+  cv::Sobel(b, gx, CV_32F, 1, 0, 3);
+  cv::Sobel(b, gy, CV_32F, 0, 1, 3);
+  double worst = 0, largest = 0;
+  for (int y = 0; y < 90; ++y)
+    for (int x = 0; x < 120; ++x) {
+      const Eigen::Vector2d g = mask_gradient_at(mask, x, y);
+      worst = std::max({worst, std::abs(g.x() - gx.at<float>(y, x)), std::abs(g.y() - gy.at<float>(y, x))});
+      largest = std::max(largest, g.norm());
+    }
+  EXPECT_GT(largest, 1.0);   // the blobs' edges are in the image
+  EXPECT_LT(worst, 1e-5);    // float rounding of the OpenCV filters
+  EXPECT_EQ(mask_gradient_at(mask, -1, 3), Eigen::Vector2d::Zero());
+  EXPECT_EQ(mask_gradient_at(mask, 120, 3), Eigen::Vector2d::Zero());
+}
+
+// The overlap from a render's covered box and a prepared input equals the whole-image count.
+TEST(RimMatch, OverlapFromTheCoveredBoxEqualsTheWholeImageCount) {
+  const TriMesh sphere = make_icosphere(3, 1.0);
+  const Camera cam = Camera::lookAt("c", 160, 120, 1.0, {0, 0, 4}, {0, 0, 0}, {0, 1, 0});
+  cv::Mat input(120, 160, CV_8U, cv::Scalar(0));
+  cv::circle(input, {70, 50}, 30, cv::Scalar(200), -1);
+  cv::rectangle(input, {0, 100}, {159, 119}, cv::Scalar(140), -1);  // outside the sphere's box
+  cv::rectangle(input, {10, 10}, {20, 20}, cv::Scalar(100), -1);    // below the 128 threshold
+  SilhouetteView view;
+  view.set(input);
+  for (double shift : {0.0, 0.8, 30.0}) {
+    TriMesh m = sphere;
+    m.V.col(0).array() += shift;
+    RenderBuffers b;
+    Rasterizer().render(m, cam, b);
+    const SilhouetteOverlap whole = silhouette_overlap(b.mask, input), box = silhouette_overlap(b, view);
+    EXPECT_EQ(box.xor_px, whole.xor_px) << "shift " << shift;
+    EXPECT_EQ(box.iou, whole.iou) << "shift " << shift;
+  }
 }

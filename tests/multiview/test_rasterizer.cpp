@@ -280,3 +280,51 @@ TEST(Rasterizer, TexturedAndVertexColouredShading) {
   Rasterizer(nob).render(sq, cam, b);
   EXPECT_THROW(shade_vertex_colors(sq, b), InvalidInput);
 }
+
+// Re-used buffers are reset only inside the previous render's covered box: every re-render
+// (a sphere moving across the view, shrinking, leaving it, with and without barycentrics)
+// must give exactly the buffers a fresh render gives, and the box must be the covered pixels'.
+TEST(Rasterizer, ReusedBuffersEqualFreshOnesAndTheBoxBoundsTheCover) {
+  const Camera cam = Camera::lookAt("c", 160, 120, 1.0, {0, 0, 4}, {0, 0, 0}, {0, 1, 0});
+  std::vector<TriMesh> meshes;
+  for (int i = 0; i < 6; ++i) {
+    TriMesh m = make_icosphere(3, 1.0 - 0.12 * i);
+    m.V.rowwise() += Eigen::RowVector3d(-1.6 + 0.7 * i, 0.5 - 0.25 * i, 0.0);
+    meshes.push_back(m);
+  }
+  TriMesh away = meshes[0];
+  away.V.rowwise() += Eigen::RowVector3d(50, 0, 0);  // outside the view: nothing covered
+  meshes.insert(meshes.begin() + 3, away);
+  RenderBuffers reused;
+  for (std::size_t i = 0; i < meshes.size(); ++i) {
+    RasterOptions o;
+    o.barycentrics = i % 3 != 1;
+    const Rasterizer r(o);
+    RenderBuffers fresh;
+    r.render(meshes[i], cam, fresh);
+    r.render(meshes[i], cam, reused);
+    EXPECT_EQ(reused.depth, fresh.depth) << "render " << i;
+    EXPECT_EQ(reused.face, fresh.face) << "render " << i;
+    EXPECT_EQ(reused.mask, fresh.mask) << "render " << i;
+    EXPECT_EQ(reused.bary, fresh.bary) << "render " << i;
+    int x0 = 160, x1 = -1, y0 = 120, y1 = -1;
+    for (int y = 0; y < 120; ++y)
+      for (int x = 0; x < 160; ++x)
+        if (fresh.covered(x, y)) x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+    if (x1 < 0) {
+      EXPECT_LT(reused.box_x1, reused.box_x0) << "render " << i << ": nothing covered, the box must be empty";
+    } else {
+      EXPECT_EQ(reused.box_x0, x0);
+      EXPECT_EQ(reused.box_x1, x1);
+      EXPECT_EQ(reused.box_y0, y0);
+      EXPECT_EQ(reused.box_y1, y1);
+    }
+  }
+  // Written into by the caller: markAllDirty() makes the next render reset everything.
+  std::fill(reused.mask.begin(), reused.mask.end(), std::uint8_t(7));
+  reused.markAllDirty();
+  RenderBuffers fresh;
+  Rasterizer().render(meshes[1], cam, fresh);
+  Rasterizer().render(meshes[1], cam, reused);
+  EXPECT_EQ(reused.mask, fresh.mask);
+}

@@ -72,6 +72,8 @@ struct PerformanceCapture::Impl {
   std::vector<detail::LiftedFeatures> prev, anchor;
   int frames = 0;
   int last_keyframe = 0;
+  std::vector<RenderBuffers> buffers;  // re-used by every render of every frame (no refill)
+  SilhouetteRefinement refinement;     // the same: its render buffers stay between frames
 };
 
 PerformanceCapture::PerformanceCapture() : impl_(new Impl) {}
@@ -307,7 +309,7 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
   dopt.smoothness = o.smoothness;
   dopt.robust_px = o.robust_px;
   dopt.reject_px = o.reject_px;
-  std::vector<RenderBuffers> buf;
+  std::vector<RenderBuffers>& buf = I.buffers;
   auto pose = [&](bool use_features, int rounds) {
     for (int r = 0; r < rounds; ++r) {
       report_progress(progress_, 0.3 + 0.4 * r / rounds, "pose");
@@ -377,7 +379,7 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
     ctrl.F = I.surf_faces;
     coarse.renderViews(ctrl, cameras_, buf);
     bool covered = false;
-    for (const auto& b : buf) covered = covered || std::any_of(b.face.begin(), b.face.end(), [](std::int32_t f) { return f >= 0; });
+    for (const auto& b : buf) covered = covered || b.box_x0 <= b.box_x1;
     if (!covered) throw InvalidInput(where + "the template is outside every view (no pixel covered): pose it like the performer in the first frame");
   }
   t0 = Clock::now();
@@ -433,7 +435,7 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
     }
     t1 = Clock::now();
     if (o.refine_iterations > 0) {
-      SilhouetteRefinement sr;
+      SilhouetteRefinement& sr = I.refinement;
       SilhouetteRefinementOptions so;
       so.max_iterations = o.refine_iterations;
       sr.setOptions(so);
@@ -449,7 +451,7 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
       rr.views.resize(static_cast<std::size_t>(n));
       for (int k = 0; k < n; ++k)
         rr.views[std::size_t(k)].iou_before = rr.views[std::size_t(k)].iou_after =
-            detail::silhouette_overlap(buf[std::size_t(k)].mask, silhouettes[std::size_t(k)]).iou;
+            detail::silhouette_overlap(buf[std::size_t(k)], sv[std::size_t(k)]).iou;
     }
     fr.t_refine += seconds_since(t1);
   };
@@ -507,7 +509,7 @@ void PerformanceCapture::track(const std::vector<cv::Mat>& images, const std::ve
     // face ids and depth only: lift_features computes the barycentrics at the keypoints' pixels
     // (the same values as a barycentric buffer, without its 8 bytes per pixel in every view)
     const Rasterizer fine(ro);
-    std::vector<RenderBuffers> fb;
+    std::vector<RenderBuffers>& fb = I.buffers;
     // On the tracking model itself (the transferred control mesh, before refinement): the next
     // frame's constraints move points of that model, so its surface points must be identified on it.
     fine.renderViews(model, cameras_, fb);

@@ -74,6 +74,44 @@ void check_mesh(const TriMesh& mesh, const char* who) {
 
 }  // namespace
 
+namespace {
+// Empties `out` for a W x H render: buffers of another size (or fresh ones) are filled whole;
+// buffers of this size are reset only inside the box the previous render covered.
+void reset_buffers(RenderBuffers& out, int W, int H, bool bary) {
+  const std::size_t npix = static_cast<std::size_t>(W) * H;
+  const float inf = std::numeric_limits<float>::infinity();
+  const bool reuse = out.width == W && out.height == H && out.depth.size() == npix && out.face.size() == npix &&
+                     out.mask.size() == npix && (!bary || out.bary.size() == 2 * npix);
+  if (!bary) out.bary.clear();
+  out.width = W;
+  out.height = H;
+  out.skipped_near = 0;
+  if (!reuse) {
+    out.depth.assign(npix, inf);
+    out.face.assign(npix, -1);
+    out.mask.assign(npix, 0);
+    if (bary) out.bary.assign(2 * npix, 0.0f);
+  } else {
+    const int x0 = std::max(0, out.box_x0), x1 = std::min(W - 1, out.box_x1);
+    const int y0 = std::max(0, out.box_y0), y1 = std::min(H - 1, out.box_y1);
+    if (x0 <= x1) {
+      const std::size_t len = static_cast<std::size_t>(x1 - x0 + 1);
+      for (int y = y0; y <= y1; ++y) {
+        const std::size_t i = static_cast<std::size_t>(y) * W + x0;
+        std::fill_n(out.depth.begin() + std::ptrdiff_t(i), len, inf);
+        std::fill_n(out.face.begin() + std::ptrdiff_t(i), len, -1);
+        std::fill_n(out.mask.begin() + std::ptrdiff_t(i), len, std::uint8_t(0));
+        if (bary) std::fill_n(out.bary.begin() + std::ptrdiff_t(2 * i), 2 * len, 0.0f);
+      }
+    }
+  }
+  out.box_x0 = 0;
+  out.box_y0 = 0;
+  out.box_x1 = -1;
+  out.box_y1 = -1;
+}
+}  // namespace
+
 void Rasterizer::render(const TriMesh& mesh, const Camera& cam, RenderBuffers& out) const {
   check_mesh(mesh, "Rasterizer::render");
   renderChecked(mesh, cam, out);
@@ -81,14 +119,7 @@ void Rasterizer::render(const TriMesh& mesh, const Camera& cam, RenderBuffers& o
 
 void Rasterizer::renderChecked(const TriMesh& mesh, const Camera& cam, RenderBuffers& out) const {
   const int W = cam.width(), H = cam.height();
-  const std::size_t npix = static_cast<std::size_t>(W) * H;
-  out.width = W;
-  out.height = H;
-  out.skipped_near = 0;
-  const float inf = std::numeric_limits<float>::infinity();
-  out.depth.assign(npix, inf);  // same size: a fill, no reallocation
-  out.face.assign(npix, -1);
-  out.mask.assign(npix, 0);
+  reset_buffers(out, W, H, options_.barycentrics);
   const Projected p = project_vertices(mesh, cam, options_.near_plane);
   const Eigen::Vector3d c = cam.center();
   int cover_x0 = W, cover_x1 = -1, cover_y0 = H, cover_y1 = -1;
@@ -162,12 +193,12 @@ void Rasterizer::renderChecked(const TriMesh& mesh, const Camera& cam, RenderBuf
     }
   }
 
+  out.box_x0 = cover_x0;
+  out.box_x1 = cover_x1;
+  out.box_y0 = cover_y0;
+  out.box_y1 = cover_y1;
   // Barycentrics of the visible triangle at each covered pixel centre.
-  if (!options_.barycentrics) {
-    out.bary.clear();
-    return;
-  }
-  out.bary.assign(2 * npix, 0.0f);
+  if (!options_.barycentrics) return;
   for (int y = cover_y0; y <= cover_y1; ++y) {
     for (int x = cover_x0; x <= cover_x1; ++x) {
       const std::size_t idx = static_cast<std::size_t>(y) * W + x;

@@ -4,7 +4,6 @@
 #include <cmath>
 #include <limits>
 
-#include <opencv2/imgproc.hpp>
 
 #include "tbsp/core/error.h"
 
@@ -27,12 +26,46 @@ void check_silhouettes(const std::vector<Camera>& cameras, const std::vector<cv:
   }
 }
 
-void mask_gradient(const cv::Mat& mask, cv::Mat& gx, cv::Mat& gy) {
-  cv::Mat f, b;
-  mask.convertTo(f, CV_32F, 1.0 / 255.0);
-  cv::GaussianBlur(f, b, cv::Size(5, 5), 1.2);
-  cv::Sobel(b, gx, CV_32F, 1, 0, 3);
-  cv::Sobel(b, gy, CV_32F, 0, 1, 3);
+namespace {
+// OpenCV's default border, reflect-101: -1 -> 1, n -> n - 2.
+inline int reflect101(int i, int n) {
+  if (n == 1) return 0;
+  while (i < 0 || i >= n) i = i < 0 ? -i : 2 * (n - 1) - i;
+  return i;
+}
+// The 5-tap Gaussian of σ 1.2 (cv::getGaussianKernel's weights).
+struct Gauss5 {
+  double w[5];
+  Gauss5() {
+    double s = 0;
+    for (int i = 0; i < 5; ++i) s += w[i] = std::exp(-(i - 2) * (i - 2) / (2 * 1.2 * 1.2));
+    for (double& v : w) v /= s;
+  }
+};
+}  // namespace
+
+Eigen::Vector2d mask_gradient_at(const cv::Mat& mask, int x, int y) {
+  const int W = mask.cols, H = mask.rows;
+  if (x < 0 || y < 0 || x >= W || y >= H) return Eigen::Vector2d::Zero();
+  static const Gauss5 g;
+  // the blurred mask (0..1) on the 3x3 neighbourhood the Sobel reads, each from its 5x5
+  // neighbourhood; indices reflected at each stage as the whole-image filters do
+  double b[3][3];
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int cx = reflect101(x + dx, W), cy = reflect101(y + dy, H);
+      double v = 0;
+      for (int i = 0; i < 5; ++i) {
+        const std::uint8_t* row = mask.ptr<std::uint8_t>(reflect101(cy + i - 2, H));
+        double r = 0;
+        for (int j = 0; j < 5; ++j) r += g.w[j] * row[reflect101(cx + j - 2, W)];
+        v += g.w[i] * r;
+      }
+      b[dy + 1][dx + 1] = v / 255.0;
+    }
+  const double gx = (b[0][2] - b[0][0]) + 2 * (b[1][2] - b[1][0]) + (b[2][2] - b[2][0]);
+  const double gy = (b[2][0] - b[0][0]) + 2 * (b[2][1] - b[0][1]) + (b[2][2] - b[0][2]);
+  return {gx, gy};
 }
 
 SilhouetteOverlap silhouette_overlap(const std::vector<std::uint8_t>& rendered, const cv::Mat& input) {
@@ -50,9 +83,26 @@ SilhouetteOverlap silhouette_overlap(const std::vector<std::uint8_t>& rendered, 
   return {x, uni ? static_cast<double>(inter) / static_cast<double>(uni) : 1.0};
 }
 
+SilhouetteOverlap silhouette_overlap(const RenderBuffers& r, const SilhouetteView& input) {
+  // inside the box: the rendered pixels and their intersection with the input; every input
+  // pixel outside the box is in the union and the XOR
+  long rendered = 0, inter = 0;
+  for (int y = std::max(0, r.box_y0); y <= std::min(r.height - 1, r.box_y1); ++y) {
+    const std::uint8_t* in = input.mask.ptr<std::uint8_t>(y);
+    const std::uint8_t* m = r.mask.data() + static_cast<std::size_t>(y) * r.width;
+    for (int c = std::max(0, r.box_x0); c <= std::min(r.width - 1, r.box_x1); ++c) {
+      const bool a = m[c] != 0;
+      rendered += a;
+      inter += a && in[c] != 0;
+    }
+  }
+  const long uni = rendered + input.foreground - inter;
+  return {uni - inter, uni ? static_cast<double>(inter) / static_cast<double>(uni) : 1.0};
+}
+
 void SilhouetteView::set(const cv::Mat& silhouette) {
   mask = silhouette >= 128;
-  mask_gradient(mask, gx, gy);
+  foreground = cv::countNonZero(mask);
 }
 
 namespace {
@@ -85,14 +135,12 @@ double nearest_crossing(const cv::Mat& mask, const Eigen::Vector2d& p, const Eig
 std::vector<RimMatch> match_rims(const TriMesh& mesh, const Camera& cam, const RenderBuffers& b, const SilhouetteView& input,
                                  const RimMatchOptions& o) {
   std::vector<RimMatch> out;
-  cv::Mat rmask(b.height, b.width, CV_8U, const_cast<std::uint8_t*>(b.mask.data()));
-  cv::Mat rgx, rgy;
-  mask_gradient(rmask, rgx, rgy);
+  const cv::Mat rmask(b.height, b.width, CV_8U, const_cast<std::uint8_t*>(b.mask.data()));
   for (int v : rim_vertices(mesh, cam, b)) {
     const Eigen::Vector3d X = mesh.V.row(v).transpose();
     const Eigen::Vector2d p = cam.project(X);
     const int px = std::clamp(static_cast<int>(std::lround(p.x())), 0, b.width - 1), py = std::clamp(static_cast<int>(std::lround(p.y())), 0, b.height - 1);
-    Eigen::Vector2d g(rgx.at<float>(py, px), rgy.at<float>(py, px));
+    const Eigen::Vector2d g = mask_gradient_at(rmask, px, py);
     if (!(g.norm() > 1e-3)) continue;
     const Eigen::Vector2d nrm = -g.normalized();  // outward normal of the rendered contour
     // Nearest inside->outside crossing of the input silhouette along the normal, measured against
@@ -108,7 +156,7 @@ std::vector<RimMatch> match_rims(const TriMesh& mesh, const Camera& cam, const R
     if (std::abs(shift) > o.max_distance_px) continue;
     const Eigen::Vector2d c = p + t_in * nrm;  // the input contour point, for the orientation test
     const int ux = std::clamp(static_cast<int>(std::lround(c.x())), 0, b.width - 1), uy = std::clamp(static_cast<int>(std::lround(c.y())), 0, b.height - 1);
-    const Eigen::Vector2d gi(input.gx.at<float>(uy, ux), input.gy.at<float>(uy, ux));
+    const Eigen::Vector2d gi = mask_gradient_at(input.mask, ux, uy);
     if (!(gi.norm() > 1e-3) || gi.normalized().dot(g.normalized()) < o.cos_max) continue;  // orientation test
     const Eigen::Vector2d u = p + shift * nrm;
     out.push_back({v, u, std::abs(shift), gi.normalized()});

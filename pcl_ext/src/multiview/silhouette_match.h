@@ -21,8 +21,12 @@ namespace tbsp::detail {
 /// non-empty silhouette per camera.
 void check_silhouettes(const std::vector<Camera>& cameras, const std::vector<cv::Mat>& silhouettes, const std::string& where);
 
-/// Smoothed mask gradient (points from background into the foreground), CV_32F.
-void mask_gradient(const cv::Mat& mask, cv::Mat& gx, cv::Mat& gy);
+/// Smoothed gradient of a 0/255 CV_8U mask at pixel (x, y) (points from background into the
+/// foreground): a 5x5 Gaussian (σ 1.2) then a 3x3 Sobel, both with OpenCV's default border
+/// (reflect-101), evaluated at that one pixel from its 7x7 neighbourhood — the value of
+/// GaussianBlur + Sobel of the whole image there (to float rounding; computed in double), at a
+/// cost independent of the image size. (0, 0) outside the image.
+Eigen::Vector2d mask_gradient_at(const cv::Mat& mask, int x, int y);
 
 struct SilhouetteOverlap {
   long xor_px = 0;
@@ -31,12 +35,17 @@ struct SilhouetteOverlap {
 /// Overlap of a rendered mask (255/0, row-major, the silhouette's size) and an input silhouette (>= 128 foreground).
 SilhouetteOverlap silhouette_overlap(const std::vector<std::uint8_t>& rendered, const cv::Mat& input);
 
-/// One view's input silhouette with its gradient, ready for rim matching.
+/// One view's input silhouette, ready for rim matching and overlap measures.
 struct SilhouetteView {
-  cv::Mat mask;    ///< CV_8U, 255 foreground
-  cv::Mat gx, gy;  ///< mask_gradient(mask)
+  cv::Mat mask;         ///< CV_8U, 255 foreground
+  long foreground = 0;  ///< foreground pixels of `mask`
   void set(const cv::Mat& silhouette);
 };
+
+/// The same overlap from a render (its mask and covered box) and a prepared input: only the
+/// render's covered box is read (the input's pixels outside it are all in the XOR and the
+/// union), so the cost follows the rendered area rather than the image size. Same result.
+SilhouetteOverlap silhouette_overlap(const RenderBuffers& rendered, const SilhouetteView& input);
 
 struct RimMatchOptions {
   double search_px = 25;        ///< search along the contour normal, both ways

@@ -59,13 +59,13 @@ void SilhouetteRefinement::refine(TriMesh& refined) {
   rep.views.resize(n);
   TriMesh current = mesh_, best = mesh_;
   long best_xor = -1;
-  std::vector<RenderBuffers> buf(n);
+  std::vector<RenderBuffers>& buf = buffers_;
   auto measure = [&](const TriMesh& m, std::vector<detail::SilhouetteOverlap>& ov) {
     rast.renderViews(m, cameras_, buf);
     ov.resize(n);
     long total = 0;
     for (int k = 0; k < n; ++k) {
-      ov[k] = detail::silhouette_overlap(buf[k].mask, silhouettes_[k]);
+      ov[k] = detail::silhouette_overlap(buf[k], input[k]);
       total += ov[k].xor_px;
     }
     return total;
@@ -73,7 +73,7 @@ void SilhouetteRefinement::refine(TriMesh& refined) {
   std::vector<detail::SilhouetteOverlap> ov;
   best_xor = measure(current, ov);
   bool covered = false;
-  for (int k = 0; k < n && !covered; ++k) covered = std::any_of(buf[k].face.begin(), buf[k].face.end(), [](std::int32_t f) { return f >= 0; });
+  for (int k = 0; k < n && !covered; ++k) covered = buf[k].box_x0 <= buf[k].box_x1;
   if (!covered) throw InvalidInput(where + "the mesh is outside every view (no pixel covered): pose the mesh in the studio's frame first");
   rep.xor_before = best_xor;
   for (int k = 0; k < n; ++k) {

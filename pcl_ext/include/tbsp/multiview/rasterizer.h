@@ -13,8 +13,9 @@
 /// Triangles with a vertex behind the near plane are skipped and counted (the studio case
 /// has the subject in front of every camera).
 ///
-/// Complexity: O(#faces + covered bounding-box pixels) per view; views run in parallel
-/// (OpenMP) in renderViews. Memory: 17 bytes per pixel with barycentrics, 9 without.
+/// Complexity: O(#faces + covered bounding-box pixels) per view when the buffers are re-used
+/// (fresh buffers are first filled: O(pixels)); views run in parallel (OpenMP) in renderViews.
+/// Memory: 17 bytes per pixel with barycentrics, 9 without.
 
 #include <cstdint>
 #include <vector>
@@ -44,6 +45,18 @@ struct RenderBuffers {
   std::vector<float> bary;         ///< 2 per pixel: (b1, b2), b0 = 1 - b1 - b2; 0 where empty (empty vector if not requested)
   std::vector<std::uint8_t> mask;  ///< 255 where the mesh covers the pixel centre, else 0
   int skipped_near = 0;            ///< triangles skipped because they cross the near plane
+  /// Bounding box of the covered pixels, inclusive; empty (box_x1 < box_x0) when none is.
+  /// A render into buffers that already have the camera's size resets only this box, since
+  /// the renderer wrote nothing outside it (for a performer filling a tenth of a 1004² view,
+  /// 9 MB less to write per view and render). Code that writes into the buffers itself must
+  /// call markAllDirty() before rendering into them again.
+  int box_x0 = 0, box_y0 = 0, box_x1 = -1, box_y1 = -1;
+  void markAllDirty() {
+    box_x0 = 0;
+    box_y0 = 0;
+    box_x1 = width - 1;
+    box_y1 = height - 1;
+  }
 
   bool covered(int x, int y) const { return face[static_cast<std::size_t>(y) * width + x] >= 0; }
   // As OpenCV images (mask, depth, shaded colour): tbsp/io/render_images.h (tbsp_capture_io),

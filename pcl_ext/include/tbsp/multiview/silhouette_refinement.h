@@ -33,6 +33,7 @@
 #include "tbsp/core/progress.h"
 #include "tbsp/mesh/tri_mesh.h"
 #include "tbsp/multiview/camera.h"
+#include "tbsp/multiview/rasterizer.h"
 
 namespace tbsp {
 
@@ -87,6 +88,7 @@ private:
   int frame_ = 0;
   TriMesh mesh_;
   SilhouetteRefinementReport report_;
+  std::vector<RenderBuffers> buffers_;  // kept between refine() calls: re-used, not re-filled
 };
 
 }  // namespace tbsp
