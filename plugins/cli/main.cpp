@@ -7,11 +7,13 @@
 
 #include "command.h"
 #include "tbsp/core/error.h"
+#include "tbsp/core/heap.h"
 #include "tbsp/core/huge_pages.h"
 #include "tbsp/core/logging.h"
 
 int main(int argc, char** argv) {
   tbsp::reexec_with_huge_pages(argv);  // before any thread starts (huge_pages.h)
+  tbsp::keep_freed_memory();           // per-frame loops re-use their large blocks (heap.h)
   CLI::App app{"tbsp - template-based shape processing for PCL pipelines"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "tbsp 0.1.0");
