@@ -147,12 +147,17 @@ struct Problem {
   TriMesh surf;
   int evaluations = 0;
   double last_overlap = 0;
+  std::vector<SilhouetteView> views;  // o->silhouettes, prepared once for the overlap counts
 
   double overlap(const Eigen::MatrixX3d& X) {
+    if (views.empty()) {
+      views.resize(o->silhouettes.size());
+      for (std::size_t k = 0; k < views.size(); ++k) views[k].set(o->silhouettes[k]);
+    }
     surf.V = X;
     rast.renderViews(surf, o->cameras, buf);
     double iou = 0;
-    for (std::size_t k = 0; k < buf.size(); ++k) iou += silhouette_overlap(buf[k].mask, o->silhouettes[k]).iou;
+    for (std::size_t k = 0; k < buf.size(); ++k) iou += silhouette_overlap(buf[k], views[k]).iou;
     return iou / double(buf.size());
   }
   // Sets the offsets, restores the rotations, one deformer iteration.
@@ -181,7 +186,7 @@ int optimize_handles(TetDeformer& D, const std::vector<int>& key, const std::vec
                      double& overlap_before, double& overlap_after) {
   RasterOptions ro;
   ro.barycentrics = false;
-  Problem pb{&D, &key, &targets, &o, D.rotations(), Rasterizer(ro), {}, {}, 0, 0};
+  Problem pb{&D, &key, &targets, &o, D.rotations(), Rasterizer(ro), {}, {}, 0, 0, {}};
   pb.surf.F = o.surface;
   const unsigned dim = unsigned(3 * key.size());
   std::vector<double> x(dim, 0.0), lo(dim, -3 * o.step), hi(dim, 3 * o.step);
