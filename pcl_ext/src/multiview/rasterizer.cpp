@@ -72,9 +72,6 @@ void check_mesh(const TriMesh& mesh, const char* who) {
   if (!mesh.V.allFinite()) throw InvalidInput(std::string("[tbsp::") + who + "] the mesh has NaN/Inf vertex coordinates");
 }
 
-}  // namespace
-
-namespace {
 // Empties `out` for a W x H render: buffers of another size (or fresh ones) are filled whole;
 // buffers of this size are reset only inside the box the previous render covered.
 void reset_buffers(RenderBuffers& out, int W, int H, bool bary) {

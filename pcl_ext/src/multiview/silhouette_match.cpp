@@ -4,7 +4,6 @@
 #include <cmath>
 #include <limits>
 
-
 #include "tbsp/core/error.h"
 
 namespace tbsp::detail {
