@@ -71,6 +71,18 @@ void PbdClothSimulator::setMesh(const Eigen::MatrixX3d& V, const Eigen::MatrixX3
   rest_ = V;
   F_ = F;
   const Eigen::Index n = V.rows();
+  // vertex -> faces (ascending face index: the order the normals were scattered in, so the
+  // per-vertex gather in applyExternal sums them in the same order)
+  vf_offsets_.assign(std::size_t(n) + 1, 0);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) ++vf_offsets_[std::size_t(F(f, k)) + 1];
+  for (std::size_t i = 0; i < std::size_t(n); ++i) vf_offsets_[i + 1] += vf_offsets_[i];
+  vf_faces_.assign(std::size_t(vf_offsets_.back()), 0);
+  {
+    std::vector<int> fill(vf_offsets_.begin(), vf_offsets_.end() - 1);
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) vf_faces_[std::size_t(fill[std::size_t(F(f, k))]++)] = int(f);
+  }
   // edges -> wing vertices
   std::map<std::pair<int, int>, std::vector<int>> wings;
   for (Eigen::Index f = 0; f < F.rows(); ++f)
@@ -262,6 +274,7 @@ void PbdClothSimulator::step(const Eigen::MatrixX3d& targets_in, const std::vect
   };
   const std::size_t n = pos_.size();
   inv_mass_.resize(n);
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
   for (std::size_t i = 0; i < n; ++i) inv_mass_[i] = delta_(Eigen::Index(i)) > 0 ? 1.0 / mass_(Eigen::Index(i)) : 0.0;
   if (tethers_dirty_) buildTethers();
   const int interval = settings_.contact_interval;
@@ -276,6 +289,7 @@ void PbdClothSimulator::step(const Eigen::MatrixX3d& targets_in, const std::vect
     travel.resize(n);
     double vmax = 0;
     const double fall = 0.5 * settings_.gravity.norm() * T * T;
+#pragma omp parallel for schedule(static) reduction(max : vmax) if (n >= kParallelMin)
     for (std::size_t i = 0; i < n; ++i) {
       if (inv_mass_[i] != 0) {
         travel[i] = vel_[i].norm() * T + fall;

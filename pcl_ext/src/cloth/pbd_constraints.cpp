@@ -25,9 +25,6 @@ inline double fast_acos(double x) {
 // can diverge at full stiffness (k_bend = 1 would give 1 per sweep).
 constexpr double kMaxBendSweep = 0.5;
 
-// The sweeps run on several threads only for meshes large enough to pay for the barriers.
-constexpr std::size_t kParallelMin = 1024;
-
 // Sweeps the colours of a constraint graph: each colour split over the threads of the enclosing
 // parallel region (static schedule: the same split every time), the conflict colour (if any) by
 // one thread.
@@ -48,28 +45,34 @@ void sweep_colours(const std::vector<std::vector<int>>& colours, std::size_t con
 }  // namespace
 
 void PbdClothSimulator::applyExternal(double dt) {
-  const std::size_t n = pos_.size();
-  // area-weighted vertex normals of the current positions (for the drag split, eq. 10.5)
-  Points normal(n, Eigen::Vector3d::Zero());
-  for (Eigen::Index f = 0; f < F_.rows(); ++f) {
-    const Eigen::Vector3d& a = pos_[std::size_t(F_(f, 0))];
-    const Eigen::Vector3d fn = (pos_[std::size_t(F_(f, 1))] - a).cross(pos_[std::size_t(F_(f, 2))] - a);
-    for (int k = 0; k < 3; ++k) normal[std::size_t(F_(f, k))] += fn;
-  }
+  const std::size_t n = pos_.size(), nf = std::size_t(F_.rows());
+  // area-weighted vertex normals of the current positions (for the drag split, eq. 10.5): face
+  // normals, then each vertex's sum over its faces in ascending order (as a scatter would add them)
+  face_normal_.resize(nf);
   const double h = settings_.drag_constant, unit = settings_.drag_unit;
-#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+#pragma omp parallel if (n >= kParallelMin)
+  {
+#pragma omp for schedule(static)
+  for (std::size_t f = 0; f < nf; ++f) {
+    const Eigen::Vector3d& a = pos_[std::size_t(F_(Eigen::Index(f), 0))];
+    face_normal_[f] = (pos_[std::size_t(F_(Eigen::Index(f), 1))] - a).cross(pos_[std::size_t(F_(Eigen::Index(f), 2))] - a);
+  }
+#pragma omp for schedule(static)
   for (std::size_t i = 0; i < n; ++i) {
     if (inv_mass_[i] == 0) continue;
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+    for (int q = vf_offsets_[i]; q < vf_offsets_[i + 1]; ++q) normal += face_normal_[std::size_t(vf_faces_[std::size_t(q)])];
     const ClothMaterial& m = materials_[std::size_t(region_(Eigen::Index(i)))];
     Eigen::Vector3d acc = settings_.gravity;
-    const double len = normal[i].norm();
+    const double len = normal.norm();
     if (len > 0 && h > 0) {
       // f_d = −½ A h (d_n |u_n|² n̂ + d_t u_t), A = m: the acceleration is f_d / m
-      const Eigen::Vector3d nn = normal[i] / len;
+      const Eigen::Vector3d nn = normal / len;
       const Eigen::Vector3d un = vel_[i].dot(nn) * nn, ut = vel_[i] - un;
       acc -= 0.5 * h * (m.d_n * un.norm() / unit * un + m.d_t * ut);
     }
     vel_[i] += dt * acc;
+  }
   }
 }
 
@@ -94,15 +97,27 @@ void PbdClothSimulator::findProxyCandidates(const std::vector<RoundCone>& prev, 
     ab[k] = prev[k].b - prev[k].a;
     l2[k] = ab[k].squaredNorm();
   }
+  auto near = [&](std::size_t i, std::size_t k) {
+    const double t = l2[k] > 0 ? std::clamp((pos_[i] - prev[k].a).dot(ab[k]) / l2[k], 0.0, 1.0) : 0.0;
+    return (pos_[i] - (prev[k].a + t * ab[k])).squaredNorm() < reach2[k];
+  };
+  // two passes over the vertices (count, then fill in vertex order), each split over threads
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
   for (std::size_t i = 0; i < n; ++i) {
-    proxy_offsets_[i] = int(proxy_pairs_.size());
-    if (inv_mass_[i] == 0) continue;
-    for (std::size_t k = 0; k < np; ++k) {
-      const double t = l2[k] > 0 ? std::clamp((pos_[i] - prev[k].a).dot(ab[k]) / l2[k], 0.0, 1.0) : 0.0;
-      if ((pos_[i] - (prev[k].a + t * ab[k])).squaredNorm() < reach2[k]) proxy_pairs_.emplace_back(int(i), int(k));
-    }
+    int c = 0;
+    if (inv_mass_[i] != 0)
+      for (std::size_t k = 0; k < np; ++k) c += near(i, k);
+    proxy_offsets_[i + 1] = c;
   }
-  proxy_offsets_[n] = int(proxy_pairs_.size());
+  for (std::size_t i = 0; i < n; ++i) proxy_offsets_[i + 1] += proxy_offsets_[i];
+  proxy_pairs_.resize(std::size_t(proxy_offsets_[n]));
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+  for (std::size_t i = 0; i < n; ++i) {
+    std::size_t q = std::size_t(proxy_offsets_[i]);
+    if (q == std::size_t(proxy_offsets_[i + 1])) continue;
+    for (std::size_t k = 0; k < np; ++k)
+      if (near(i, k)) proxy_pairs_[q++] = {int(i), int(k)};
+  }
 }
 
 void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
@@ -385,10 +400,12 @@ void PbdClothSimulator::substep(const Eigen::MatrixX3d& targets, const std::vect
   // targets at the end of this sub-step
   Points& tgt = sub_targets_;
   tgt.resize(n);
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
   for (std::size_t i = 0; i < n; ++i)
     tgt[i] = ((1 - t1) * targets_prev_.row(Eigen::Index(i)) + t1 * targets.row(Eigen::Index(i))).transpose();
 
   applyExternal(dt);
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
   for (std::size_t i = 0; i < n; ++i) pred_[i] = inv_mass_[i] != 0 ? Eigen::Vector3d(pos_[i] + dt * vel_[i]) : tgt[i];
   const int it = settings_.iterations;
   const int sweeps = it * settings_.substeps;  // stiffnesses are per frame: n_iter sweeps in total
@@ -414,9 +431,13 @@ void PbdClothSimulator::substep(const Eigen::MatrixX3d& targets, const std::vect
   }
   int self = 0;
   const double s = 2 * settings_.thickness;
-  for (const auto& [i, j] : self_pairs_) self += (pred_[std::size_t(i)] - pred_[std::size_t(j)]).norm() < s * 1.01;
+  const std::size_t np = self_pairs_.size();
+#pragma omp parallel for schedule(static) reduction(+ : self) if (np >= kParallelMin)
+  for (std::size_t q = 0; q < np; ++q)
+    self += (pred_[std::size_t(self_pairs_[q].first)] - pred_[std::size_t(self_pairs_[q].second)]).norm() < s * 1.01;
   self_contacts_ = self;
 
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
   for (std::size_t i = 0; i < n; ++i) {
     vel_[i] = (pred_[i] - pos_[i]) / dt;
     pos_[i] = pred_[i];

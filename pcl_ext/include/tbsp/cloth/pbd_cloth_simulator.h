@@ -151,6 +151,10 @@ private:
   void contactVelocities(const std::vector<RoundCone>& prev, const std::vector<RoundCone>& cur, double dt);
   void syncOut();
 
+  // Per-vertex and per-constraint loops run on several threads only for meshes large enough
+  // to pay for the barriers.
+  static constexpr std::size_t kParallelMin = 1024;
+
   PbdSettings settings_;
   Eigen::MatrixX3i F_;
   Eigen::MatrixX3d rest_;
@@ -160,6 +164,8 @@ private:
   Eigen::VectorXd mass_, delta_;
   std::vector<double> inv_mass_;
   Points sub_targets_;            // scratch: the targets at the end of a sub-step
+  Points face_normal_;            // scratch: area-weighted face normals of a sub-step
+  std::vector<int> vf_offsets_, vf_faces_;  // vertex i's faces, ascending: [vf_offsets_[i], vf_offsets_[i+1])
   std::vector<double> travel_;    // scratch: distance each vertex can travel in a contact window
   std::vector<double> k_blend_;  // per-sweep blend stiffness, cached
   int k_blend_sweeps_ = 0;
