@@ -97,7 +97,7 @@ void PbdClothSimulator::findProxyCandidates(const std::vector<RoundCone>& prev, 
     ab[k] = prev[k].b - prev[k].a;
     l2[k] = ab[k].squaredNorm();
   }
-  auto near = [&](std::size_t i, std::size_t k) {
+  auto reaches = [&](std::size_t i, std::size_t k) {
     const double t = l2[k] > 0 ? std::clamp((pos_[i] - prev[k].a).dot(ab[k]) / l2[k], 0.0, 1.0) : 0.0;
     return (pos_[i] - (prev[k].a + t * ab[k])).squaredNorm() < reach2[k];
   };
@@ -106,7 +106,7 @@ void PbdClothSimulator::findProxyCandidates(const std::vector<RoundCone>& prev, 
   for (std::size_t i = 0; i < n; ++i) {
     int c = 0;
     if (inv_mass_[i] != 0)
-      for (std::size_t k = 0; k < np; ++k) c += near(i, k);
+      for (std::size_t k = 0; k < np; ++k) c += reaches(i, k);
     proxy_offsets_[i + 1] = c;
   }
   for (std::size_t i = 0; i < n; ++i) proxy_offsets_[i + 1] += proxy_offsets_[i];
@@ -116,7 +116,7 @@ void PbdClothSimulator::findProxyCandidates(const std::vector<RoundCone>& prev, 
     std::size_t q = std::size_t(proxy_offsets_[i]);
     if (q == std::size_t(proxy_offsets_[i + 1])) continue;
     for (std::size_t k = 0; k < np; ++k)
-      if (near(i, k)) proxy_pairs_[q++] = {int(i), int(k)};
+      if (reaches(i, k)) proxy_pairs_[q++] = {int(i), int(k)};
   }
 }
 
