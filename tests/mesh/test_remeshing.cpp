@@ -309,3 +309,19 @@ TEST(Topology, GrowRegionAndUmbrellaStep) {
       EXPECT_EQ(moved[std::size_t(i)], 0);
     }
 }
+
+// vertex_faces: each vertex's faces, ascending, exactly the faces that list it.
+TEST(Topology, VertexFacesListEachVertexsFacesInAscendingOrder) {
+  const TriMesh m = make_icosphere(2, 1.0);
+  std::vector<int> off, faces;
+  vertex_faces(m.F, m.V.rows(), off, faces);
+  ASSERT_EQ(off.size(), std::size_t(m.V.rows()) + 1);
+  EXPECT_EQ(off.back(), int(3 * m.F.rows()));
+  for (Eigen::Index v = 0; v < m.V.rows(); ++v) {
+    std::vector<int> expect;
+    for (Eigen::Index f = 0; f < m.F.rows(); ++f)
+      if ((m.F.row(f).array() == int(v)).any()) expect.push_back(int(f));
+    const std::vector<int> got(faces.begin() + off[std::size_t(v)], faces.begin() + off[std::size_t(v) + 1]);
+    EXPECT_EQ(got, expect) << "vertex " << v;
+  }
+}

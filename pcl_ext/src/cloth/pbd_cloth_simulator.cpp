@@ -73,16 +73,7 @@ void PbdClothSimulator::setMesh(const Eigen::MatrixX3d& V, const Eigen::MatrixX3
   const Eigen::Index n = V.rows();
   // vertex -> faces (ascending face index: the order the normals were scattered in, so the
   // per-vertex gather in applyExternal sums them in the same order)
-  vf_offsets_.assign(std::size_t(n) + 1, 0);
-  for (Eigen::Index f = 0; f < F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) ++vf_offsets_[std::size_t(F(f, k)) + 1];
-  for (std::size_t i = 0; i < std::size_t(n); ++i) vf_offsets_[i + 1] += vf_offsets_[i];
-  vf_faces_.assign(std::size_t(vf_offsets_.back()), 0);
-  {
-    std::vector<int> fill(vf_offsets_.begin(), vf_offsets_.end() - 1);
-    for (Eigen::Index f = 0; f < F.rows(); ++f)
-      for (int k = 0; k < 3; ++k) vf_faces_[std::size_t(fill[std::size_t(F(f, k))]++)] = int(f);
-  }
+  vertex_faces(F, n, vf_offsets_, vf_faces_);
   // edges -> wing vertices
   std::map<std::pair<int, int>, std::vector<int>> wings;
   for (Eigen::Index f = 0; f < F.rows(); ++f)

@@ -179,15 +179,8 @@ int count_local_folds(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, std:
     A.row(f) = (b - a).cross(c - a).transpose();
   }
   // faces per vertex, compressed (offsets + indices)
-  std::vector<int> off(std::size_t(nv) + 1, 0), vf(std::size_t(nf) * 3);
-  for (Eigen::Index f = 0; f < nf; ++f)
-    for (int q = 0; q < 3; ++q) ++off[std::size_t(F(f, q)) + 1];
-  for (Eigen::Index v = 0; v < nv; ++v) off[std::size_t(v) + 1] += off[std::size_t(v)];
-  {
-    std::vector<int> fill(off.begin(), off.end() - 1);
-    for (Eigen::Index f = 0; f < nf; ++f)
-      for (int q = 0; q < 3; ++q) vf[std::size_t(fill[std::size_t(F(f, q))]++)] = int(f);
-  }
+  std::vector<int> off, vf;
+  vertex_faces(F, nv, off, vf);
   // per face: the area vectors of the distinct faces at the vertices within two rings of its
   // corners, summed
   std::vector<char> folded(std::size_t(nf), 0);

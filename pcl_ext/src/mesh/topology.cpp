@@ -37,6 +37,17 @@ std::vector<std::vector<int>> vertex_adjacency(const Eigen::MatrixX3i& F, Eigen:
   return adj;
 }
 
+void vertex_faces(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, std::vector<int>& offsets, std::vector<int>& faces) {
+  offsets.assign(std::size_t(num_vertices) + 1, 0);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) ++offsets[std::size_t(F(f, k)) + 1];
+  for (std::size_t v = 0; v < std::size_t(num_vertices); ++v) offsets[v + 1] += offsets[v];
+  faces.assign(std::size_t(offsets.back()), 0);
+  std::vector<int> fill(offsets.begin(), offsets.end() - 1);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) faces[std::size_t(fill[std::size_t(F(f, k))]++)] = int(f);
+}
+
 int connected_components(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, Eigen::VectorXi& labels) {
   std::vector<int> parent(static_cast<std::size_t>(num_vertices));
   std::iota(parent.begin(), parent.end(), 0);

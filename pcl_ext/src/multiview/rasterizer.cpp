@@ -73,7 +73,8 @@ void check_mesh(const TriMesh& mesh, const char* who) {
 }
 
 // Empties `out` for a W x H render: buffers of another size (or fresh ones) are filled whole;
-// buffers of this size are reset only inside the box the previous render covered.
+// buffers of this size are reset only inside the box the previous render covered (the render
+// then sets the box anew).
 void reset_buffers(RenderBuffers& out, int W, int H, bool bary) {
   const std::size_t npix = static_cast<std::size_t>(W) * H;
   const float inf = std::numeric_limits<float>::infinity();
@@ -102,10 +103,6 @@ void reset_buffers(RenderBuffers& out, int W, int H, bool bary) {
       }
     }
   }
-  out.box_x0 = 0;
-  out.box_y0 = 0;
-  out.box_x1 = -1;
-  out.box_y1 = -1;
 }
 }  // namespace
 

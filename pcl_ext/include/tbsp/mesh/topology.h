@@ -13,6 +13,10 @@ Eigen::MatrixX2i unique_edges(const Eigen::MatrixX3i& F);
 /// Per-vertex sorted neighbour lists (one-ring over faces). O(#F log #F).
 std::vector<std::vector<int>> vertex_adjacency(const Eigen::MatrixX3i& F, Eigen::Index num_vertices);
 
+/// Faces around each vertex, compressed: vertex v's faces are faces[offsets[v] .. offsets[v+1])
+/// in ascending face index (a face listing a vertex twice appears twice). O(#F + #V).
+void vertex_faces(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, std::vector<int>& offsets, std::vector<int>& faces);
+
 /// Component label per vertex (0..k-1, face-connected; each isolated vertex is its own
 /// component). Returns k. O(#F α).
 int connected_components(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, Eigen::VectorXi& labels);
