@@ -46,16 +46,14 @@ struct Pair {
   double dist;
 };
 
-}  // namespace
-
-void coarse_stage(FitState& s) {
-  if (s.u.coarse_nodes <= 0) return;
-  const auto t0 = Clock::now();
-  report_progress(s.progress, 0.08, "coarse stage");
-  FitReport& rep = s.rep;
-  const Eigen::Index nv = s.V.rows();
+// One graph of `nodes` nodes built on X and fitted to the cloud over the stiffness schedule;
+// returns the deformed template (all vertices), adds the Gauss-Newton steps to `steps_run` and
+// sets `node_count` to the graph's nodes.
+Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, int& steps_run, int& node_count) {
+  const Eigen::Index nv = X0.rows();
   DeformationGraph graph;
-  graph.build(s.V, s.F, s.u.coarse_nodes, 4);
+  graph.build(X0, s.F, nodes, 4);
+  node_count = graph.nodeCount();
   // samples: template vertices (not masked) and ROI cloud points
   std::vector<char> vok(std::size_t(nv), 1);
   for (std::size_t v = 0; v < s.masked.size() && v < vok.size(); ++v) vok[v] = !s.masked[v];
@@ -66,10 +64,9 @@ void coarse_stage(FitState& s) {
   const double r_start = s.u.coarse_radius * s.diag, r_end = std::max(2.0 * s.u.max_match_distance, 0.01 * s.diag);
   const double a_start = s.u.coarse_stiffness, a_end = s.u.coarse_final_stiffness;
   const double tol = 1e-3 * s.diag;  // a round ends when the graph moves less (measured: same fit as 1e-4, 40 % fewer steps)
-  int steps_run = 0;
   // the iterations need the sampled vertices only: their positions, and normals turned by the
   // graph (the blended node rotations applied to the rest normal); all vertices at the end
-  const Eigen::MatrixX3d N0 = vertex_normals(s.V, s.F);
+  const Eigen::MatrixX3d N0 = vertex_normals(X0, s.F);
   Eigen::MatrixX3d Xs(Eigen::Index(vs.size()), 3), Ns(Eigen::Index(vs.size()), 3);
   for (int round = 0; round < rounds; ++round) {
     const double f = rounds > 1 ? double(round) / (rounds - 1) : 1.0;
@@ -133,7 +130,25 @@ void coarse_stage(FitState& s) {
       if (move < tol) break;
     }
   }
-  const Eigen::MatrixX3d X = graph.deform();
+  return graph.deform();
+}
+
+}  // namespace
+
+void coarse_stage(FitState& s) {
+  if (s.u.coarse_nodes <= 0) return;
+  const auto t0 = Clock::now();
+  report_progress(s.progress, 0.08, "coarse stage");
+  FitReport& rep = s.rep;
+  int steps_run = 0, nodes = 0;
+  // the second hypothesis of a fit without markers: a coarser graph first, whose part-sized
+  // regions (a head, a limb) turn as wholes towards the data, then the fine graph from there
+  Eigen::MatrixX3d X = s.V;
+  if (s.coarse_prepass > 0 && s.coarse_prepass < s.u.coarse_nodes) {
+    X = fit_graph(s, X, s.coarse_prepass, steps_run, nodes);
+    rep.coarse_prepass_nodes = nodes;
+  }
+  X = fit_graph(s, X, s.u.coarse_nodes, steps_run, nodes);
   // the later stages refine the coarse shape: it becomes their rest shape (its Laplacian
   // coordinates carry the template's detail as the graph turned it), at scale 1, no rotations
   s.coarse.V = X;
@@ -146,9 +161,9 @@ void coarse_stage(FitState& s) {
   s.V = X;
   s.V0 = X;
   rep.coarse_steps = steps_run;
-  rep.coarse_nodes = graph.nodeCount();
+  rep.coarse_nodes = nodes;
   rep.t_coarse = seconds_since(t0);
-  logger()->debug("[TemplateFitting] coarse stage: {} nodes, {} steps, {:.3f} s", graph.nodeCount(), steps_run, rep.t_coarse);
+  logger()->debug("[TemplateFitting] coarse stage: {} nodes, {} steps, {:.3f} s", rep.coarse_nodes, steps_run, rep.t_coarse);
 }
 
 }  // namespace fit_impl

@@ -204,6 +204,8 @@ bool FitParameters::isValid(std::string* why) const {
   if (max_vertices < 4) return bad("max_vertices must be >= 4");
   if (auto_markers < 0 || auto_markers > 1000) return bad("auto_markers must be in 0..1000 (0 = one pass)");
   if (coarse_nodes != 0 && (coarse_nodes < 4 || coarse_nodes > 20000)) return bad("coarse_nodes must be 0 (off) or in 4..20000");
+  if (coarse_prepass_nodes != 0 && (coarse_prepass_nodes < 4 || coarse_prepass_nodes > 20000))
+    return bad("coarse_prepass_nodes must be 0 (one hypothesis) or in 4..20000");
   if (coarse_rounds < 1 || coarse_rounds > 100) return bad("coarse_rounds must be in 1..100");
   if (coarse_steps < 1 || coarse_steps > 100) return bad("coarse_steps must be in 1..100");
   if (!(coarse_radius > 0 && coarse_radius <= 1)) return bad("coarse_radius must be in (0, 1] (a fraction of the diagonal)");

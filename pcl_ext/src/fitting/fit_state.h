@@ -68,6 +68,9 @@ struct FitState {
   std::vector<int> prop_ids;         ///< per vertex: id of its propagated constraint (-1: none)
   bool propagation_handled = false;  ///< propagation decided in the loop (done or skipped for good)
   TriMesh coarse;                    ///< the coarse stage's result: the rest shape of the later stages
+  /// nodes of a coarser graph the coarse stage fits first (the second hypothesis of a fit
+  /// without markers, FitParameters::coarse_prepass_nodes); 0: the coarse_nodes graph alone
+  int coarse_prepass = 0;
 
   /// The template the stages fit: the user's, or its similarity alignment when there are no
   /// markers (align_without_markers).

@@ -3,6 +3,7 @@
 #include "tbsp/fitting/template_fitter.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <limits>
 
 #include "fit_state.h"
@@ -18,7 +19,10 @@ namespace {
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                    const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                    TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                   bool orient_normals);
+                   bool orient_normals, int coarse_prepass);
+FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
+                         const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
+                         bool orient_normals, int coarse_prepass);
 
 }  // namespace
 
@@ -27,8 +31,46 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
                        TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
                        bool orient_normals) {
   if (!markers.empty() || params.auto_markers == 0 || params.remeshing)
-    return fit_once(templ, P_in, N_in, markers, roi, params, result, status, progress, orient_normals);
-  // without markers: the aligned fit, then its matched vertices as markers of a second fit
+    return fit_once(templ, P_in, N_in, markers, roi, params, result, status, progress, orient_normals, 0);
+  const auto t_all = Clock::now();
+  auto part = [&](double lo, double hi) -> ProgressCallback {
+    if (!progress) return {};
+    return [&progress, lo, hi](double f, const std::string& stage) { return progress(lo + (hi - lo) * f, stage); };
+  };
+  // Without markers nothing but nearest points tells the coarse stage where a turned part went,
+  // and it can settle in the wrong place; a second hypothesis whose coarser graph turns parts as
+  // wholes first settles elsewhere, and the data decide (measured: docs/dev/fitting_experiments.md).
+  const bool two = params.coarse_nodes > 0 && params.coarse_prepass_nodes > 0 && params.coarse_prepass_nodes < params.coarse_nodes;
+  FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, result, status, part(0.0, two ? 0.5 : 1.0), orient_normals, 0);
+  if (two) {
+    TriMesh r2;
+    std::vector<VertexStatus> s2;
+    FitReport rep2 = markerless_fit(templ, P_in, N_in, roi, params, r2, s2, part(0.5, 1.0), orient_normals, params.coarse_prepass_nodes);
+    const double p99_single = rep.p99, p99_prepass = rep2.p99;
+    if (p99_prepass < p99_single) {  // ties keep the single graph
+      rep = std::move(rep2);
+      result = std::move(r2);
+      status = std::move(s2);
+    }
+    rep.coarse_rejected_p99 = p99_prepass < p99_single ? p99_single : p99_prepass;
+    rep.coarse_hypotheses = 2;
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "two coarse-stage hypotheses, p99 %.4g with the %d-node graph alone and %.4g with a %d-node graph first: the %s kept. ",
+                  p99_single, params.coarse_nodes, p99_prepass, params.coarse_prepass_nodes, p99_prepass < p99_single ? "second" : "first");
+    rep.message += buf;
+  } else if (params.coarse_nodes > 0) {
+    rep.coarse_hypotheses = 1;
+  }
+  rep.t_total = seconds_since(t_all);
+  return rep;
+}
+
+namespace {
+
+// Without markers: the aligned fit, then its matched vertices as markers of a second fit.
+FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
+                         const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
+                         bool orient_normals, int coarse_prepass) {
   const auto t_all = Clock::now();
   auto part = [&](double lo, double hi) -> ProgressCallback {
     if (!progress) return {};
@@ -39,7 +81,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
                             // roughly placed bunny seeds 1-5, the same scale bias, twice the time)
   TriMesh r1;
   std::vector<VertexStatus> s1;
-  const FitReport rep1 = fit_once(templ, P_in, N_in, {}, roi, first, r1, s1, part(0.0, 0.4), orient_normals);
+  const FitReport rep1 = fit_once(templ, P_in, N_in, {}, roi, first, r1, s1, part(0.0, 0.4), orient_normals, coarse_prepass);
   std::vector<int> matched;
   for (std::size_t v = 0; v < s1.size(); ++v)
     if (s1[v] == VertexStatus::Matched) matched.push_back(int(v));
@@ -56,7 +98,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     m.position = r1.V.row(v).transpose();
     auto_markers.push_back(m);
   }
-  FitReport rep = fit_once(templ, P_in, N_in, auto_markers, roi, params, result, status, part(0.4, 1.0), orient_normals);
+  FitReport rep = fit_once(templ, P_in, N_in, auto_markers, roi, params, result, status, part(0.4, 1.0), orient_normals, coarse_prepass);
   rep.aligned_without_markers = true;
   rep.alignment = rep1.alignment;
   rep.alignment_rotation_deg = rep1.alignment_rotation_deg;
@@ -71,17 +113,20 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   return rep;
 }
 
+}  // namespace
+
 namespace {
 
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                        const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                        TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                       bool orient_normals) {
+                       bool orient_normals, int coarse_prepass) {
   const auto t_all = Clock::now();
   // one BLAS thread: no contention with our OpenMP loops (blas_threads.h)
   const ScopedBlasThreads blas_threads(1);
   FitReport rep;
   fit_impl::FitState s(templ, markers, progress, rep, status);
+  s.coarse_prepass = coarse_prepass;
   std::string why;
   if (!params.isValid(&why)) throw InvalidInput(s.who + "invalid parameters: " + why);
   MeshRequirements req;

@@ -144,6 +144,14 @@ struct FitParameters {
   /// and costs a little accuracy where the markers already pose the template well
   /// (docs/fitting.md). 400 is the measured setting. 0 or 4..20000.
   int coarse_nodes = 0;
+  /// Without markers (the auto_markers flow) and with the coarse stage on: nodes of a coarser
+  /// graph for a second hypothesis. The whole fit runs twice, once with the coarse_nodes graph
+  /// alone and once with a graph of this many nodes fitted first (regions the size of a head or
+  /// a limb turn as wholes towards the data), then the coarse_nodes graph from there; the fit
+  /// closer to the cloud (lower 99th percentile cloud → fit distance, FitReport::p99) is kept.
+  /// Twice the time of a fit without markers; unused with markers (they pose the parts).
+  /// Default 100. 0 (one hypothesis) or 4..20000; used only when below coarse_nodes.
+  int coarse_prepass_nodes = 100;
   /// Rounds of the coarse stage: stiffness and radius fall geometrically over them. Default 5. 1..100.
   int coarse_rounds = 5;
   /// Gauss-Newton steps (each with new correspondences) per round at most. Default 6. 1..100.
@@ -257,6 +265,10 @@ struct FitReport {
   double alignment_rotation_deg = 0, alignment_scale = 1, alignment_rms = 0;
   int alignment_iterations = 0;
   int coarse_nodes = 0, coarse_steps = 0;  ///< coarse stage: graph nodes, Gauss-Newton steps (0: off)
+  /// without markers, with the coarse stage: hypotheses fitted (2 with FitParameters::coarse_prepass_nodes),
+  /// the kept one's coarser graph (its nodes; 0: the coarse_nodes graph alone) and the other's p99
+  int coarse_hypotheses = 0, coarse_prepass_nodes = 0;
+  double coarse_rejected_p99 = 0;
   int auto_markers = 0;  ///< markers taken from the aligned fit for the second pass (FitParameters::auto_markers)
   FitParameters used;                    ///< parameters with the derived values filled in
   Eigen::Index points_total = 0, points_skipped_nonfinite = 0, points_excluded = 0;
