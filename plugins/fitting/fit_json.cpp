@@ -131,7 +131,11 @@ nlohmann::json fit_report_json(const FitReport& r) {
                       {"auto_markers", r.auto_markers},
                       {"seconds", r.t_alignment}};
   }
-  if (r.coarse_nodes > 0) j["coarse_stage"] = {{"nodes", r.coarse_nodes}, {"steps", r.coarse_steps}, {"seconds", r.t_coarse}};
+  if (r.coarse_nodes > 0) {
+    j["coarse_stage"] = {{"nodes", r.coarse_nodes}, {"steps", r.coarse_steps}, {"seconds", r.t_coarse}};
+    if (r.coarse_hypotheses > 1)
+      j["coarse_stage"]["hypotheses"] = {{"count", r.coarse_hypotheses}, {"kept_prepass_nodes", r.coarse_prepass_nodes}, {"rejected_p99", r.coarse_rejected_p99}};
+  }
   const auto& u = r.used;
   j["parameters"] = {{"max_match_distance", u.max_match_distance}, {"initial_match_distance", u.initial_match_distance},
                      {"max_normal_angle_deg", u.max_normal_angle_deg}, {"max_iterations", u.max_iterations},
@@ -152,7 +156,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"coarse_nodes", u.coarse_nodes}, {"coarse_rounds", u.coarse_rounds}, {"coarse_steps", u.coarse_steps},
                      {"coarse_radius", u.coarse_radius}, {"coarse_stiffness", u.coarse_stiffness},
                      {"coarse_final_stiffness", u.coarse_final_stiffness}, {"coarse_normal_angle_deg", u.coarse_normal_angle_deg},
-                     {"coarse_point_weight", u.coarse_point_weight}};
+                     {"coarse_point_weight", u.coarse_point_weight}, {"coarse_prepass_nodes", u.coarse_prepass_nodes}};
   j["counts"] = {{"points", r.points_total}, {"points_skipped_nonfinite", r.points_skipped_nonfinite},
                  {"points_excluded", r.points_excluded}, {"normals_estimated", r.normals_estimated},
                  {"normals_flipped_for_consistency", r.normals_flipped_for_consistency},
