@@ -148,6 +148,22 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
                 dir, &err),
             2);
   EXPECT_NE(err.find("coarse_nodes"), std::string::npos) << err;
+  // without markers the coarse stage runs two hypotheses and the report says which was kept
+  const std::string rep5 = (dir / "r5.json").string();
+  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out2 + " --report " + rep5 +
+                    " --coarse-nodes 200 --coarse-prepass-nodes 50",
+                dir, &err),
+            0)
+      << err;
+  nlohmann::json j5;
+  std::ifstream(rep5) >> j5;
+  EXPECT_EQ(j5["coarse_stage"]["hypotheses"]["count"].get<int>(), 2);
+  const int kept = j5["coarse_stage"]["hypotheses"]["kept_prepass_nodes"].get<int>();
+  EXPECT_TRUE(kept == 0 || kept == 50) << kept;
+  EXPECT_GE(j5["coarse_stage"]["hypotheses"]["rejected_p99"].get<double>(), j5["metrics"]["p99"].get<double>());
+  EXPECT_EQ(j5["parameters"]["coarse_prepass_nodes"].get<int>(), 50);
+  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out2 + " --coarse-nodes 200 --coarse-prepass-nodes 2", dir, &err), 2);
+  EXPECT_NE(err.find("coarse_prepass_nodes"), std::string::npos) << err;
   // bad input: a marker on a missing template vertex -> exit 2, message names it, output kept
   const auto before = std::filesystem::last_write_time(out);
   std::ofstream(dir / "bad.json") << R"({"markers": [{"template_vertex": 999999, "cloud_index": 0}]})";
