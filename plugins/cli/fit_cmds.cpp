@@ -157,7 +157,7 @@ void add_fit_commands(CLI::App& app, CommandTable& table) {
   fitc->add_option("--match-weight", a->p.match_weight, "weight of data constraints");
   fitc->add_option("--coarse-nodes", a->p.coarse_nodes,
                    "coarse stage: nodes of a deformation graph fitted to the scan before the iterations, for parts "
-                   "turned about joints (400 is the measured setting; 0 = off, the default)");
+                   "turned about joints (400 is the measured setting; default -1: 400 without markers, off with them; 0 = off)");
   fitc->add_option("--coarse-prepass-nodes", a->p.coarse_prepass_nodes,
                    "without markers, with --coarse-nodes: nodes of a coarser graph fitted first in a second hypothesis; "
                    "the fit closer to the scan is kept (default 100; 0 = one hypothesis)");

@@ -203,7 +203,8 @@ bool FitParameters::isValid(std::string* why) const {
   if (normal_neighbours < 3) return bad("normal_neighbours must be >= 3");
   if (max_vertices < 4) return bad("max_vertices must be >= 4");
   if (auto_markers < 0 || auto_markers > 1000) return bad("auto_markers must be in 0..1000 (0 = one pass)");
-  if (coarse_nodes != 0 && (coarse_nodes < 4 || coarse_nodes > 20000)) return bad("coarse_nodes must be 0 (off) or in 4..20000");
+  if (coarse_nodes != 0 && coarse_nodes != -1 && (coarse_nodes < 4 || coarse_nodes > 20000))
+    return bad("coarse_nodes must be -1 (automatic), 0 (off) or in 4..20000");
   if (coarse_prepass_nodes != 0 && (coarse_prepass_nodes < 4 || coarse_prepass_nodes > 20000))
     return bad("coarse_prepass_nodes must be 0 (one hypothesis) or in 4..20000");
   if (coarse_rounds < 1 || coarse_rounds > 100) return bad("coarse_rounds must be in 1..100");

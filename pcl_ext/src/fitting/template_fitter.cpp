@@ -23,10 +23,27 @@ FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eig
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
                          bool orient_normals, int coarse_prepass);
+FitReport fit_resolved(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
+                       const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
+                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
+                       bool orient_normals);
 
 }  // namespace
 
 FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
+                       const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
+                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
+                       bool orient_normals) {
+  // coarse_nodes −1: the coarse stage for fits that align the template themselves (no markers)
+  const bool aligning = markers.empty() && params.auto_markers > 0 && !params.remeshing && params.align_without_markers;
+  FitParameters resolved = params;
+  if (resolved.coarse_nodes == -1) resolved.coarse_nodes = aligning ? 400 : 0;
+  return fit_resolved(templ, P_in, N_in, markers, roi, resolved, result, status, progress, orient_normals);
+}
+
+namespace {
+
+FitReport fit_resolved(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                        const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                        TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
                        bool orient_normals) {
@@ -64,8 +81,6 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   rep.t_total = seconds_since(t_all);
   return rep;
 }
-
-namespace {
 
 // Without markers: the aligned fit, then its matched vertices as markers of a second fit.
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,

@@ -140,10 +140,12 @@ struct FitParameters {
   int auto_markers = 30;
   /// Nodes of the embedded deformation graph of the coarse stage (a stiffness-annealed
   /// non-rigid ICP between the initial deformation and the §5.3 iterations; follows parts turned
-  /// about joints; fit_coarse.cpp). Default 0 (off): it pays for pose differences of 30-45°
-  /// and costs a little accuracy where the markers already pose the template well
-  /// (docs/fitting.md). 400 is the measured setting. 0 or 4..20000.
-  int coarse_nodes = 0;
+  /// about joints; fit_coarse.cpp). Default −1 (automatic): 400 for a fit without markers that
+  /// aligns the template itself (align_without_markers, auto_markers > 0, no remeshing), where
+  /// nothing else can follow a turned part; off with markers, where it pays for pose differences
+  /// of 30-45° and costs a little accuracy when the markers already pose the template well
+  /// (docs/fitting.md). 400 is the measured setting. −1, 0 (off) or 4..20000.
+  int coarse_nodes = -1;
   /// Without markers (the auto_markers flow) and with the coarse stage on: nodes of a coarser
   /// graph for a second hypothesis. The whole fit runs twice, once with the coarse_nodes graph
   /// alone and once with a graph of this many nodes fitted first (regions the size of a head or
