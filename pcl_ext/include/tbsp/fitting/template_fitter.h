@@ -8,9 +8,9 @@
 ///  1. initial deformation with the rotation field (eq. 3.12) from the markers;
 ///  2. global scale λ from ratios of Dijkstra geodesics between markers (§5.2), iterated to a
 ///     fixed point (the thesis does one step; data ×3 out of scale needs a few) and re-solve;
-///  2b. optional coarse stage (coarse_nodes > 0): a deformation graph fitted to the cloud by
-///     stiffness-annealed non-rigid ICP (DeformationGraph), for parts turned about joints; its
-///     result is the rest shape of the steps below;
+///  2b. coarse stage (coarse_nodes > 0; by default only without markers): a deformation graph
+///     fitted to the cloud by stiffness-annealed non-rigid ICP (DeformationGraph), for parts
+///     turned about joints; its result is the rest shape of the steps below;
 ///  3. iterative matching (§5.3): per template vertex the cloud points within r_max whose normals
 ///     deviate ≤ θ_max, averaged with the quadratic B-spline kernel, projected on the vertex
 ///     normal; weighted constraints; re-solve until the largest vertex move < tolerance;
