@@ -210,7 +210,7 @@ int main(int argc, char** argv) {
     const std::vector<FitMarker> markers = scan_markers(t.V, P, real_markers);
     std::vector<std::pair<const char*, FitParameters>> variants = {{"default", base}};
     FitParameters cp = base;
-    if (cp.coarse_nodes == 0) cp.coarse_nodes = 400;
+    if (cp.coarse_nodes <= 0) cp.coarse_nodes = 400;  // -1 (automatic) is off with markers
     cp.detail_rounds = std::max(cp.detail_rounds, 4);
     variants.push_back({"coarse stage + 4 detail rounds", cp});
     for (const auto& [what, params] : variants) {
@@ -222,7 +222,7 @@ int main(int argc, char** argv) {
       std::snprintf(note, sizeof note, "%s: scan->fit p99 %.3f%%, max %.3f%%; scans->bun_zipper p99 %.3f%% (+0.05%% = %.3f%%: %s)", what,
                     100 * p99, 100 * d.maxCoeff() / diag, 100 * ref99, 100 * (ref99 + 5e-4), p99 <= ref99 + 5e-4 ? "within" : "NOT within");
       row(name, markers.size(), t.V.rows(), P.rows(), r, note);
-      if (!save_fit.empty()) write_mesh(save_fit + "_" + std::to_string(int(deg)) + (params.coarse_nodes > 0 && base.coarse_nodes == 0 ? "_coarse" : "") + ".ply", fit);
+      if (!save_fit.empty()) write_mesh(save_fit + "_" + std::to_string(int(deg)) + (params.coarse_nodes > 0 && base.coarse_nodes <= 0 ? "_coarse" : "") + ".ply", fit);
     }
   }
   // 2a. articulated ground truth (fitting v2 issue): the model's head / ears / limbs turned by DEG

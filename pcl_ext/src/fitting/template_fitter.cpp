@@ -23,46 +23,34 @@ FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eig
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
                          bool orient_normals, int coarse_prepass);
-FitReport fit_resolved(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
-                       const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
-                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                       bool orient_normals);
+
+// The part [lo, hi] of `progress` (empty when `progress` is).
+ProgressCallback sub_progress(const ProgressCallback& progress, double lo, double hi) {
+  if (!progress) return {};
+  return [&progress, lo, hi](double f, const std::string& stage) { return progress(lo + (hi - lo) * f, stage); };
+}
 
 }  // namespace
 
 FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
-                       const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
+                       const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params_in,
                        TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
                        bool orient_normals) {
-  // coarse_nodes −1: the coarse stage for fits that align the template themselves (no markers)
-  const bool aligning = markers.empty() && params.auto_markers > 0 && !params.remeshing && params.align_without_markers;
-  FitParameters resolved = params;
-  if (resolved.coarse_nodes == -1) resolved.coarse_nodes = aligning ? 400 : 0;
-  return fit_resolved(templ, P_in, N_in, markers, roi, resolved, result, status, progress, orient_normals);
-}
-
-namespace {
-
-FitReport fit_resolved(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
-                       const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
-                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                       bool orient_normals) {
-  if (!markers.empty() || params.auto_markers == 0 || params.remeshing)
-    return fit_once(templ, P_in, N_in, markers, roi, params, result, status, progress, orient_normals, 0);
+  const bool markerless = markers.empty() && params_in.auto_markers != 0 && !params_in.remeshing;
+  // coarse_nodes −1: the coarse stage when the fit aligns the template itself
+  FitParameters params = params_in;
+  if (params.coarse_nodes == -1) params.coarse_nodes = markerless && params.align_without_markers ? 400 : 0;
+  if (!markerless) return fit_once(templ, P_in, N_in, markers, roi, params, result, status, progress, orient_normals, 0);
   const auto t_all = Clock::now();
-  auto part = [&](double lo, double hi) -> ProgressCallback {
-    if (!progress) return {};
-    return [&progress, lo, hi](double f, const std::string& stage) { return progress(lo + (hi - lo) * f, stage); };
-  };
   // Without markers nothing but nearest points tells the coarse stage where a turned part went,
   // and it can settle in the wrong place; a second hypothesis whose coarser graph turns parts as
   // wholes first settles elsewhere, and the data decide (measured: docs/dev/fitting_experiments.md).
   const bool two = params.coarse_nodes > 0 && params.coarse_prepass_nodes > 0 && params.coarse_prepass_nodes < params.coarse_nodes;
-  FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, result, status, part(0.0, two ? 0.5 : 1.0), orient_normals, 0);
+  FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, result, status, sub_progress(progress, 0.0, two ? 0.5 : 1.0), orient_normals, 0);
   if (two) {
     TriMesh r2;
     std::vector<VertexStatus> s2;
-    FitReport rep2 = markerless_fit(templ, P_in, N_in, roi, params, r2, s2, part(0.5, 1.0), orient_normals, params.coarse_prepass_nodes);
+    FitReport rep2 = markerless_fit(templ, P_in, N_in, roi, params, r2, s2, sub_progress(progress, 0.5, 1.0), orient_normals, params.coarse_prepass_nodes);
     const double p99_single = rep.p99, p99_prepass = rep2.p99;
     if (p99_prepass < p99_single) {  // ties keep the single graph
       rep = std::move(rep2);
@@ -82,21 +70,19 @@ FitReport fit_resolved(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   return rep;
 }
 
+namespace {
+
 // Without markers: the aligned fit, then its matched vertices as markers of a second fit.
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
                          bool orient_normals, int coarse_prepass) {
   const auto t_all = Clock::now();
-  auto part = [&](double lo, double hi) -> ProgressCallback {
-    if (!progress) return {};
-    return [&progress, lo, hi](double f, const std::string& stage) { return progress(lo + (hi - lo) * f, stage); };
-  };
   FitParameters first = params;
   first.detail_rounds = 0;  // (2 rounds here: clean Hausdorff 0.50-0.91 % for 0.61-0.93 % over the
                             // roughly placed bunny seeds 1-5, the same scale bias, twice the time)
   TriMesh r1;
   std::vector<VertexStatus> s1;
-  const FitReport rep1 = fit_once(templ, P_in, N_in, {}, roi, first, r1, s1, part(0.0, 0.4), orient_normals, coarse_prepass);
+  const FitReport rep1 = fit_once(templ, P_in, N_in, {}, roi, first, r1, s1, sub_progress(progress, 0.0, 0.4), orient_normals, coarse_prepass);
   std::vector<int> matched;
   for (std::size_t v = 0; v < s1.size(); ++v)
     if (s1[v] == VertexStatus::Matched) matched.push_back(int(v));
@@ -113,7 +99,7 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
     m.position = r1.V.row(v).transpose();
     auto_markers.push_back(m);
   }
-  FitReport rep = fit_once(templ, P_in, N_in, auto_markers, roi, params, result, status, part(0.4, 1.0), orient_normals, coarse_prepass);
+  FitReport rep = fit_once(templ, P_in, N_in, auto_markers, roi, params, result, status, sub_progress(progress, 0.4, 1.0), orient_normals, coarse_prepass);
   rep.aligned_without_markers = true;
   rep.alignment = rep1.alignment;
   rep.alignment_rotation_deg = rep1.alignment_rotation_deg;
@@ -127,10 +113,6 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
   rep.t_total = seconds_since(t_all);
   return rep;
 }
-
-}  // namespace
-
-namespace {
 
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                        const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
