@@ -12,7 +12,7 @@
 //     --save-target FILE writes its true shape; --hole-oracle adds the hole
 //     floor of a rigidity prior (a deformation graph driven by the true positions outside the hole)
 //   --coarse N / --coarse-stiffness A0 A1 / --coarse-rounds N / --coarse-steps N / --coarse-radius R /
-//   --coarse-angle DEG / --coarse-point-weight W / --coarse-prepass N: the coarse stage (FitParameters::coarse_*);
+//   --coarse-angle DEG / --coarse-point-weight W / --coarse-prepass N[,N...]: the coarse stage (FitParameters::coarse_*);
 //   --refine-rotations, --detail-rounds N, --max-iterations N: as FitParameters
 // Times are the median of N runs (default 3; this machine is shared and noisy); the 43k row
 // also prints where the time goes (median stage times).
@@ -29,6 +29,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -49,10 +50,13 @@ static const std::string kData = TBSP_SHARED_DATA_DIR;
 
 namespace {
 void row(const char* model, std::size_t markers, Eigen::Index verts, Eigen::Index pts, const FitReport& r, const char* extra = "") {
-  char coarse[128] = "";
+  char coarse[160] = "", kept[96] = "";
+  if (r.coarse_hypotheses > 1) {
+    if (r.coarse_prepass_nodes > 0) std::snprintf(kept, sizeof kept, "; %d hypotheses, kept: %d-node graph first", r.coarse_hypotheses, r.coarse_prepass_nodes);
+    else std::snprintf(kept, sizeof kept, "; %d hypotheses, kept: one graph", r.coarse_hypotheses);
+  }
   if (r.coarse_nodes > 0)
-    std::snprintf(coarse, sizeof coarse, " (coarse stage %.2f s, %d steps%s)", r.t_coarse, r.coarse_steps,
-                  r.coarse_hypotheses < 2 ? "" : r.coarse_prepass_nodes > 0 ? "; 2 hypotheses, kept: coarser graph first" : "; 2 hypotheses, kept: one graph");
+    std::snprintf(coarse, sizeof coarse, " (coarse stage %.2f s, %d steps%s)", r.t_coarse, r.coarse_steps, kept);
   std::printf("| %-34s | %3zu | %6ld | %7ld | %6.3f%% | %6.3f%% | %2d | %6.2f | %s%s\n", model, markers, (long)verts, (long)pts,
               100 * r.hausdorff_rel, 100 * r.p99 / r.bbox_diagonal, r.iterations, r.t_total, extra, coarse);
 }
@@ -157,12 +161,17 @@ int main(int argc, char** argv) {
     else if (a == "--coarse-radius" && i + 1 < argc) base.coarse_radius = std::atof(argv[++i]);
     else if (a == "--coarse-angle" && i + 1 < argc) base.coarse_normal_angle_deg = std::atof(argv[++i]);
     else if (a == "--coarse-point-weight" && i + 1 < argc) base.coarse_point_weight = std::atof(argv[++i]);
-    else if (a == "--coarse-prepass" && i + 1 < argc) base.coarse_prepass_nodes = std::atoi(argv[++i]);
+    else if (a == "--coarse-prepass" && i + 1 < argc) {  // comma-separated; 0 = one hypothesis
+      base.coarse_prepass_nodes.clear();
+      std::stringstream list(argv[++i]);
+      for (std::string item; std::getline(list, item, ',');)
+        if (std::atoi(item.c_str()) != 0) base.coarse_prepass_nodes.push_back(std::atoi(item.c_str()));
+    }
     else {
       std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N] "
                            "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--max-iterations N] "
                            "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--hole-axis 0|1|2] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
-                           "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W] [--coarse-prepass N]\n");
+                           "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W] [--coarse-prepass N[,N...]]\n");
       return 2;
     }
   }

@@ -43,6 +43,7 @@ int cmd_fit(FitArgs a) {
   a.p.rotation_field = !a.no_field;
   a.p.detail_residual_matching = !a.kernel_detail;
   a.p.pleat_collapse = !a.no_pleats;
+  if (a.p.coarse_prepass_nodes == std::vector<int>{0}) a.p.coarse_prepass_nodes.clear();  // --coarse-prepass-nodes 0
   tbsp::cli::ProgressBar bar(!a.quiet);
   tbsp::TriMesh out;
   tbsp::FitReport rep;
@@ -159,8 +160,9 @@ void add_fit_commands(CLI::App& app, CommandTable& table) {
                    "coarse stage: nodes of a deformation graph fitted to the scan before the iterations, for parts "
                    "turned about joints (400 is the measured setting; default -1: 400 without markers, off with them; 0 = off)");
   fitc->add_option("--coarse-prepass-nodes", a->p.coarse_prepass_nodes,
-                   "without markers, with --coarse-nodes: nodes of a coarser graph fitted first in a second hypothesis; "
-                   "the fit closer to the scan is kept (default 100; 0 = one hypothesis)");
+                   "without markers, with --coarse-nodes: comma-separated nodes of coarser graphs, each fitted first in one "
+                   "more hypothesis; the fit closest to the scan is kept (default 100,200; 0 = one hypothesis)")
+      ->delimiter(',');
   fitc->add_option("--detail-rounds", a->p.detail_rounds,
                    "rounds of Laplacian updating after the fit, unsupported vertices held (sharper protrusions; 0 = off)");
   fitc->add_option("--detail-radius-factor", a->p.detail_radius_factor,

@@ -134,7 +134,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
   if (r.coarse_nodes > 0) {
     j["coarse_stage"] = {{"nodes", r.coarse_nodes}, {"steps", r.coarse_steps}, {"seconds", r.t_coarse}};
     if (r.coarse_hypotheses > 1)
-      j["coarse_stage"]["hypotheses"] = {{"count", r.coarse_hypotheses}, {"kept_prepass_nodes", r.coarse_prepass_nodes}, {"rejected_p99", r.coarse_rejected_p99}};
+      j["coarse_stage"]["hypotheses"] = {{"count", r.coarse_hypotheses}, {"kept", r.coarse_kept}, {"kept_prepass_nodes", r.coarse_prepass_nodes}, {"tail_means", r.coarse_scores}};
   }
   const auto& u = r.used;
   j["parameters"] = {{"max_match_distance", u.max_match_distance}, {"initial_match_distance", u.initial_match_distance},
@@ -166,7 +166,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                  {"detail_points_tracked", r.detail_points_tracked}};
   j["metrics"] = {{"bbox_diagonal", r.bbox_diagonal}, {"point_spacing", r.point_spacing},
                   {"hausdorff", r.hausdorff}, {"hausdorff_relative", r.hausdorff_rel}, {"rms", r.rms},
-                  {"mean", r.mean}, {"p99", r.p99}, {"coverage_vertices", r.coverage_vertices},
+                  {"mean", r.mean}, {"p99", r.p99}, {"tail_mean", r.tail_mean}, {"coverage_vertices", r.coverage_vertices},
                   {"coverage_points", r.coverage_points}, {"flipped_faces", r.flipped_faces}, {"folded_edges", r.folded_edges},
                   {"local_folds", r.local_folds}, {"untangled_vertices", r.untangled_vertices},
                   {"self_intersections", r.self_intersections},

@@ -2,9 +2,12 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <string>
+#include <vector>
 #include <nlohmann/json.hpp>
 #include <pcl/conversions.h>
 
@@ -148,21 +151,25 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
                 dir, &err),
             2);
   EXPECT_NE(err.find("coarse_nodes"), std::string::npos) << err;
-  // without markers the coarse stage runs two hypotheses and the report says which was kept
+  // without markers the coarse stage runs its hypotheses and the report says which was kept
   const std::string rep5 = (dir / "r5.json").string();
   ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out2 + " --report " + rep5 +
-                    " --coarse-nodes 200 --coarse-prepass-nodes 50",
+                    " --coarse-nodes 200 --coarse-prepass-nodes 50,400",
                 dir, &err),
             0)
       << err;
   nlohmann::json j5;
   std::ifstream(rep5) >> j5;
-  EXPECT_EQ(j5["coarse_stage"]["hypotheses"]["count"].get<int>(), 2);
+  EXPECT_EQ(j5["coarse_stage"]["hypotheses"]["count"].get<int>(), 2);  // 400 is not below the 200-node graph: skipped
   const int kept = j5["coarse_stage"]["hypotheses"]["kept_prepass_nodes"].get<int>();
   EXPECT_TRUE(kept == 0 || kept == 50) << kept;
-  EXPECT_GE(j5["coarse_stage"]["hypotheses"]["rejected_p99"].get<double>(), j5["metrics"]["p99"].get<double>());
-  EXPECT_EQ(j5["parameters"]["coarse_prepass_nodes"].get<int>(), 50);
-  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out2 + " --coarse-nodes 200 --coarse-prepass-nodes 2", dir, &err), 2);
+  const auto tails = j5["coarse_stage"]["hypotheses"]["tail_means"].get<std::vector<double>>();
+  ASSERT_EQ(tails.size(), 2u);
+  EXPECT_EQ(tails[std::size_t(j5["coarse_stage"]["hypotheses"]["kept"].get<int>())], j5["metrics"]["tail_mean"].get<double>());
+  EXPECT_LE(j5["metrics"]["tail_mean"].get<double>(), std::min(tails[0], tails[1]));
+  EXPECT_GE(j5["metrics"]["tail_mean"].get<double>(), j5["metrics"]["p99"].get<double>());
+  EXPECT_EQ(j5["parameters"]["coarse_prepass_nodes"].get<std::vector<int>>(), (std::vector<int>{50, 400}));
+  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out2 + " --coarse-nodes 200 --coarse-prepass-nodes 100,2", dir, &err), 2);
   EXPECT_NE(err.find("coarse_prepass_nodes"), std::string::npos) << err;
   // bad input: a marker on a missing template vertex -> exit 2, message names it, output kept
   const auto before = std::filesystem::last_write_time(out);

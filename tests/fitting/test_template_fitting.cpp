@@ -187,8 +187,8 @@ TEST(TemplateFittingBadInput, ClearErrors) {
                    +[](FitParameters& q) { q.detail_weight = 0; }, +[](FitParameters& q) { q.detail_marker_weight = 0; },
                    +[](FitParameters& q) { q.detail_radius_factor = 0.1; }, +[](FitParameters& q) { q.detail_radius_factor = NAN; },
                    +[](FitParameters& q) { q.detail_normal_angle_deg = 0; }, +[](FitParameters& q) { q.detail_tolerance = -1; },
-                   +[](FitParameters& q) { q.support_points = -1; }, +[](FitParameters& q) { q.coarse_prepass_nodes = 2; },
-                   +[](FitParameters& q) { q.coarse_prepass_nodes = -1; }, +[](FitParameters& q) { q.coarse_prepass_nodes = 30000; }}) {
+                   +[](FitParameters& q) { q.support_points = -1; }, +[](FitParameters& q) { q.coarse_prepass_nodes = {2}; },
+                   +[](FitParameters& q) { q.coarse_prepass_nodes = {100, -1}; }, +[](FitParameters& q) { q.coarse_prepass_nodes = {30000}; }}) {
     FitParameters q;
     bad(q);
     std::string why;

@@ -39,6 +39,13 @@ void compute_metrics(FitState& s, int known_crossings) {
     std::vector<double> sorted(dist.data(), dist.data() + nq);
     std::nth_element(sorted.begin(), sorted.begin() + long(0.99 * double(nq - 1)), sorted.end());
     rep.p99 = sorted[std::size_t(0.99 * double(nq - 1))];
+    // the largest 1 % (at least one): right of the p99 element after the partition above
+    const std::size_t k = std::max<std::size_t>(1, std::size_t(nq) / 100);
+    std::nth_element(sorted.begin(), sorted.end() - std::ptrdiff_t(k), sorted.end());
+    std::sort(sorted.end() - std::ptrdiff_t(k), sorted.end());  // one summation order
+    double tail = 0;
+    for (auto it = sorted.end() - std::ptrdiff_t(k); it != sorted.end(); ++it) tail += *it;
+    rep.tail_mean = tail / double(k);
     rep.coverage_points = double((dist.array() <= u.max_match_distance).count()) / double(nq);
     // fold-overs: face normal against the cloud normals near the face centre. Estimated normals
     // are first made consistent for this count (unless the fit already did): a patch the

@@ -205,8 +205,9 @@ bool FitParameters::isValid(std::string* why) const {
   if (auto_markers < 0 || auto_markers > 1000) return bad("auto_markers must be in 0..1000 (0 = one pass)");
   if (coarse_nodes != 0 && coarse_nodes != -1 && (coarse_nodes < 4 || coarse_nodes > 20000))
     return bad("coarse_nodes must be -1 (automatic), 0 (off) or in 4..20000");
-  if (coarse_prepass_nodes != 0 && (coarse_prepass_nodes < 4 || coarse_prepass_nodes > 20000))
-    return bad("coarse_prepass_nodes must be 0 (one hypothesis) or in 4..20000");
+  for (int c : coarse_prepass_nodes)
+    if (c < 4 || c > 20000)
+      return bad("coarse_prepass_nodes: each entry must be in 4..20000 (" + std::to_string(c) + " given; an empty list = one hypothesis)");
   if (coarse_rounds < 1 || coarse_rounds > 100) return bad("coarse_rounds must be in 1..100");
   if (coarse_steps < 1 || coarse_steps > 100) return bad("coarse_steps must be in 1..100");
   if (!(coarse_radius > 0 && coarse_radius <= 1)) return bad("coarse_radius must be in (0, 1] (a fraction of the diagonal)");

@@ -43,28 +43,43 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   if (!markerless) return fit_once(templ, P_in, N_in, markers, roi, params, result, status, progress, orient_normals, 0);
   const auto t_all = Clock::now();
   // Without markers nothing but nearest points tells the coarse stage where a turned part went,
-  // and it can settle in the wrong place; a second hypothesis whose coarser graph turns parts as
-  // wholes first settles elsewhere, and the data decide (measured: docs/dev/fitting_experiments.md).
-  const bool two = params.coarse_nodes > 0 && params.coarse_prepass_nodes > 0 && params.coarse_prepass_nodes < params.coarse_nodes;
-  FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, result, status, sub_progress(progress, 0.0, two ? 0.5 : 1.0), orient_normals, 0);
-  if (two) {
-    TriMesh r2;
-    std::vector<VertexStatus> s2;
-    FitReport rep2 = markerless_fit(templ, P_in, N_in, roi, params, r2, s2, sub_progress(progress, 0.5, 1.0), orient_normals, params.coarse_prepass_nodes);
-    const double p99_single = rep.p99, p99_prepass = rep2.p99;
-    if (p99_prepass < p99_single) {  // ties keep the single graph
-      rep = std::move(rep2);
-      result = std::move(r2);
-      status = std::move(s2);
+  // and it can settle in the wrong place; hypotheses whose coarser graphs turn parts as wholes
+  // first settle elsewhere, and the data decide (measured: docs/dev/fitting_experiments.md).
+  std::vector<int> prepass{0};  // 0: the coarse_nodes graph alone
+  if (params.coarse_nodes > 0)
+    for (int c : params.coarse_prepass_nodes)
+      if (c < params.coarse_nodes && std::find(prepass.begin(), prepass.end(), c) == prepass.end()) prepass.push_back(c);
+  const double nh = double(prepass.size());
+  FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, result, status, sub_progress(progress, 0.0, 1.0 / nh), orient_normals, 0);
+  if (params.coarse_nodes > 0) {
+    std::vector<double> scores{rep.tail_mean};
+    std::size_t kept = 0;
+    for (std::size_t h = 1; h < prepass.size(); ++h) {
+      TriMesh r2;
+      std::vector<VertexStatus> s2;
+      FitReport rep2 = markerless_fit(templ, P_in, N_in, roi, params, r2, s2, sub_progress(progress, double(h) / nh, double(h + 1) / nh),
+                                      orient_normals, prepass[h]);
+      scores.push_back(rep2.tail_mean);
+      if (rep2.tail_mean < rep.tail_mean) {  // ties keep the earlier hypothesis
+        rep = std::move(rep2);
+        result = std::move(r2);
+        status = std::move(s2);
+        kept = h;
+      }
     }
-    rep.coarse_rejected_p99 = p99_prepass < p99_single ? p99_single : p99_prepass;
-    rep.coarse_hypotheses = 2;
-    char buf[256];
-    std::snprintf(buf, sizeof buf, "two coarse-stage hypotheses, p99 %.4g with the %d-node graph alone and %.4g with a %d-node graph first: the %s kept. ",
-                  p99_single, params.coarse_nodes, p99_prepass, params.coarse_prepass_nodes, p99_prepass < p99_single ? "second" : "first");
-    rep.message += buf;
-  } else if (params.coarse_nodes > 0) {
-    rep.coarse_hypotheses = 1;
+    rep.coarse_hypotheses = int(prepass.size());
+    rep.coarse_kept = int(kept);
+    rep.coarse_scores = scores;
+    if (prepass.size() > 1) {
+      std::string msg = std::to_string(prepass.size()) + " coarse-stage hypotheses, mean of the farthest 1 % of the cloud:";
+      char buf[96];
+      for (std::size_t h = 0; h < prepass.size(); ++h) {
+        if (h == 0) std::snprintf(buf, sizeof buf, " %.4g with the %d-node graph alone", scores[h], params.coarse_nodes);
+        else std::snprintf(buf, sizeof buf, ", %.4g with a %d-node graph first", scores[h], prepass[h]);
+        msg += buf;
+      }
+      rep.message += msg + "; hypothesis " + std::to_string(kept + 1) + " kept. ";
+    }
   }
   rep.t_total = seconds_since(t_all);
   return rep;

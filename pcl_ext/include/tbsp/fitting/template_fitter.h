@@ -146,14 +146,15 @@ struct FitParameters {
   /// of 30-45° and costs a little accuracy when the markers already pose the template well
   /// (docs/fitting.md). 400 is the measured setting. −1, 0 (off) or 4..20000.
   int coarse_nodes = -1;
-  /// Without markers (the auto_markers flow) and with the coarse stage on: nodes of a coarser
-  /// graph for a second hypothesis. The whole fit runs twice, once with the coarse_nodes graph
-  /// alone and once with a graph of this many nodes fitted first (regions the size of a head or
-  /// a limb turn as wholes towards the data), then the coarse_nodes graph from there; the fit
-  /// closer to the cloud (lower 99th percentile cloud → fit distance, FitReport::p99) is kept.
-  /// Twice the time of a fit without markers; unused with markers (they pose the parts).
-  /// Default 100. 0 (one hypothesis) or 4..20000; used only when below coarse_nodes.
-  int coarse_prepass_nodes = 100;
+  /// Without markers (the auto_markers flow) and with the coarse stage on: one more hypothesis
+  /// per entry. The whole fit runs once with the coarse_nodes graph alone and once per entry with
+  /// a graph of that many nodes fitted first (regions the size of a head or a limb turn as wholes
+  /// towards the data), then the coarse_nodes graph from there; the fit closest to the cloud is
+  /// kept: the lowest mean of the largest 1 % of the cloud → fit distances (FitReport::tail_mean;
+  /// ties keep the earlier hypothesis). Each hypothesis costs one fit without markers; unused with
+  /// markers (they pose the parts). Default {100, 200} (three hypotheses). Each entry in
+  /// 4..20000; entries not below coarse_nodes and repeated entries are skipped; empty: one hypothesis.
+  std::vector<int> coarse_prepass_nodes = {100, 200};
   /// Rounds of the coarse stage: stiffness and radius fall geometrically over them. Default 5. 1..100.
   int coarse_rounds = 5;
   /// Gauss-Newton steps (each with new correspondences) per round at most. Default 6. 1..100.
@@ -267,10 +268,11 @@ struct FitReport {
   double alignment_rotation_deg = 0, alignment_scale = 1, alignment_rms = 0;
   int alignment_iterations = 0;
   int coarse_nodes = 0, coarse_steps = 0;  ///< coarse stage: graph nodes, Gauss-Newton steps (0: off)
-  /// without markers, with the coarse stage: hypotheses fitted (2 with FitParameters::coarse_prepass_nodes),
-  /// the kept one's coarser graph (its nodes; 0: the coarse_nodes graph alone) and the other's p99
-  int coarse_hypotheses = 0, coarse_prepass_nodes = 0;
-  double coarse_rejected_p99 = 0;
+  /// without markers, with the coarse stage: hypotheses fitted (1 + the usable entries of
+  /// FitParameters::coarse_prepass_nodes), the kept one's index (0: the coarse_nodes graph alone)
+  /// and coarser graph (its nodes; 0: none), and each hypothesis's tail_mean in the order they ran
+  int coarse_hypotheses = 0, coarse_kept = 0, coarse_prepass_nodes = 0;
+  std::vector<double> coarse_scores;
   int auto_markers = 0;  ///< markers taken from the aligned fit for the second pass (FitParameters::auto_markers)
   FitParameters used;                    ///< parameters with the derived values filled in
   Eigen::Index points_total = 0, points_skipped_nonfinite = 0, points_excluded = 0;
@@ -280,6 +282,9 @@ struct FitReport {
   double bbox_diagonal = 0, point_spacing = 0;
   // metrics over ROI points (cloud → mesh)
   double hausdorff = 0, hausdorff_rel = 0, rms = 0, mean = 0, p99 = 0;
+  /// mean of the largest 1 % of the distances (the mean beyond p99): how far the worst-fitted
+  /// parts of the cloud are; it ranks the coarse-stage hypotheses of a fit without markers
+  double tail_mean = 0;
   double coverage_vertices = 0;          ///< fraction of (non-masked) template vertices matched
   double coverage_points = 0;            ///< fraction of ROI points within r_max of the result
   /// faces more than 120° against the cloud normal nearest to their centre (within r_max);
