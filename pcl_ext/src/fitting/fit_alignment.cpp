@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 #include "fit_state.h"
@@ -35,7 +36,11 @@ void align_without_markers(FitState& s, TriMesh& aligned) {
   io.tolerance = 1e-6 * s.diag;
   io.max_points = 20000;
   io.stall_iterations = 0;  // as measured in docs/fitting.md
-  const SimilarityIcpResult r = similarity_icp(rest.V, cloud, io);
+  // the same template and cloud give the same alignment: computed once per fit_template call
+  std::optional<SimilarityIcpResult> local;
+  std::optional<SimilarityIcpResult>& cache = s.alignment_cache ? *s.alignment_cache : local;
+  if (!cache) cache = similarity_icp(rest.V, cloud, io);
+  const SimilarityIcpResult& r = *cache;
   const Eigen::Matrix4d T = r.transform;
   const int it = r.iterations;
   const double rms = r.rms;

@@ -17,6 +17,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -26,6 +27,7 @@
 #include "tbsp/fitting/template_fitter.h"
 #include "tbsp/mesh/harmonic.h"
 #include "tbsp/mesh/point_search.h"
+#include "tbsp/mesh/similarity_icp.h"
 #include "tbsp/mesh/tri_mesh.h"
 
 namespace tbsp {
@@ -71,6 +73,10 @@ struct FitState {
   /// nodes of a coarser graph the coarse stage fits first (the second hypothesis of a fit
   /// without markers, FitParameters::coarse_prepass_nodes); 0: the coarse_nodes graph alone
   int coarse_prepass = 0;
+  /// The similarity alignment of a fit without markers, shared by the passes and hypotheses of
+  /// one fit_template call (they align the same template to the same cloud): empty until the
+  /// first computes it; nullptr: not shared.
+  std::optional<SimilarityIcpResult>* alignment_cache = nullptr;
 
   /// The template the stages fit: the user's, or its similarity alignment when there are no
   /// markers (align_without_markers).

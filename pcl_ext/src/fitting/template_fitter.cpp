@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <limits>
+#include <optional>
 
 #include "fit_state.h"
 #include "tbsp/core/error.h"
@@ -19,10 +20,10 @@ namespace {
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                    const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                    TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                   bool orient_normals, int coarse_prepass);
+                   bool orient_normals, int coarse_prepass, std::optional<SimilarityIcpResult>* alignment = nullptr);
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                         bool orient_normals, int coarse_prepass);
+                         bool orient_normals, int coarse_prepass, std::optional<SimilarityIcpResult>* alignment);
 
 // The part [lo, hi] of `progress` (empty when `progress` is).
 ProgressCallback sub_progress(const ProgressCallback& progress, double lo, double hi) {
@@ -50,7 +51,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     for (int c : params.coarse_prepass_nodes)
       if (c < params.coarse_nodes && std::find(prepass.begin(), prepass.end(), c) == prepass.end()) prepass.push_back(c);
   const double nh = double(prepass.size());
-  FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, result, status, sub_progress(progress, 0.0, 1.0 / nh), orient_normals, 0);
+  std::optional<SimilarityIcpResult> alignment;  // the same for every hypothesis
+  FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, result, status, sub_progress(progress, 0.0, 1.0 / nh), orient_normals, 0,
+                                 &alignment);
   if (params.coarse_nodes > 0) {
     std::vector<double> scores{rep.tail_mean};
     std::size_t kept = 0;
@@ -58,7 +61,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       TriMesh r2;
       std::vector<VertexStatus> s2;
       FitReport rep2 = markerless_fit(templ, P_in, N_in, roi, params, r2, s2, sub_progress(progress, double(h) / nh, double(h + 1) / nh),
-                                      orient_normals, prepass[h]);
+                                      orient_normals, prepass[h], &alignment);
       scores.push_back(rep2.tail_mean);
       if (rep2.tail_mean < rep.tail_mean) {  // ties keep the earlier hypothesis
         rep = std::move(rep2);
@@ -90,14 +93,14 @@ namespace {
 // Without markers: the aligned fit, then its matched vertices as markers of a second fit.
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                         bool orient_normals, int coarse_prepass) {
+                         bool orient_normals, int coarse_prepass, std::optional<SimilarityIcpResult>* alignment) {
   const auto t_all = Clock::now();
   FitParameters first = params;
   first.detail_rounds = 0;  // (2 rounds here: clean Hausdorff 0.50-0.91 % for 0.61-0.93 % over the
                             // roughly placed bunny seeds 1-5, the same scale bias, twice the time)
   TriMesh r1;
   std::vector<VertexStatus> s1;
-  const FitReport rep1 = fit_once(templ, P_in, N_in, {}, roi, first, r1, s1, sub_progress(progress, 0.0, 0.4), orient_normals, coarse_prepass);
+  const FitReport rep1 = fit_once(templ, P_in, N_in, {}, roi, first, r1, s1, sub_progress(progress, 0.0, 0.4), orient_normals, coarse_prepass, alignment);
   std::vector<int> matched;
   for (std::size_t v = 0; v < s1.size(); ++v)
     if (s1[v] == VertexStatus::Matched) matched.push_back(int(v));
@@ -132,13 +135,14 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                        const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                        TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                       bool orient_normals, int coarse_prepass) {
+                       bool orient_normals, int coarse_prepass, std::optional<SimilarityIcpResult>* alignment) {
   const auto t_all = Clock::now();
   // one BLAS thread: no contention with our OpenMP loops (blas_threads.h)
   const ScopedBlasThreads blas_threads(1);
   FitReport rep;
   fit_impl::FitState s(templ, markers, progress, rep, status);
   s.coarse_prepass = coarse_prepass;
+  s.alignment_cache = alignment;
   std::string why;
   if (!params.isValid(&why)) throw InvalidInput(s.who + "invalid parameters: " + why);
   MeshRequirements req;
