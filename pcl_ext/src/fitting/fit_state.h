@@ -70,7 +70,7 @@ struct FitState {
   std::vector<int> prop_ids;         ///< per vertex: id of its propagated constraint (-1: none)
   bool propagation_handled = false;  ///< propagation decided in the loop (done or skipped for good)
   TriMesh coarse;                    ///< the coarse stage's result: the rest shape of the later stages
-  /// nodes of a coarser graph the coarse stage fits first (the second hypothesis of a fit
+  /// nodes of a coarser graph the coarse stage fits first (the later hypotheses of a fit
   /// without markers, FitParameters::coarse_prepass_nodes); 0: the coarse_nodes graph alone
   int coarse_prepass = 0;
   /// The similarity alignment of a fit without markers, shared by the passes and hypotheses of
