@@ -165,7 +165,7 @@ int main(int argc, char** argv) {
       base.coarse_prepass_nodes.clear();
       std::stringstream list(argv[++i]);
       for (std::string item; std::getline(list, item, ',');)
-        if (std::atoi(item.c_str()) != 0) base.coarse_prepass_nodes.push_back(std::atoi(item.c_str()));
+        if (const int nodes = std::atoi(item.c_str()); nodes != 0) base.coarse_prepass_nodes.push_back(nodes);
     }
     else {
       std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N] "

@@ -37,11 +37,12 @@ void compute_metrics(FitState& s, int known_crossings) {
     rep.mean = dist.mean();
     rep.rms = std::sqrt(dist.squaredNorm() / double(nq));
     std::vector<double> sorted(dist.data(), dist.data() + nq);
-    std::nth_element(sorted.begin(), sorted.begin() + long(0.99 * double(nq - 1)), sorted.end());
-    rep.p99 = sorted[std::size_t(0.99 * double(nq - 1))];
-    // the largest 1 % (at least one): right of the p99 element after the partition above
+    const auto i99 = sorted.begin() + long(0.99 * double(nq - 1));
+    std::nth_element(sorted.begin(), i99, sorted.end());
+    rep.p99 = *i99;
+    // the largest 1 % (at least one) lie at or right of the p99 element after the partition above
     const std::size_t k = std::max<std::size_t>(1, std::size_t(nq) / 100);
-    std::nth_element(sorted.begin(), sorted.end() - std::ptrdiff_t(k), sorted.end());
+    std::nth_element(i99, sorted.end() - std::ptrdiff_t(k), sorted.end());
     std::sort(sorted.end() - std::ptrdiff_t(k), sorted.end());  // one summation order
     double tail = 0;
     for (auto it = sorted.end() - std::ptrdiff_t(k); it != sorted.end(); ++it) tail += *it;
