@@ -60,12 +60,12 @@ const Eigen::MatrixX3d& FitState::consistentNormals() {
   return NC_;
 }
 
-void prepare_cloud(FitState& s, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
-                   const FitParameters& params, bool orient_normals) {
-  const std::string& who = s.who;
-  FitReport& rep = s.rep;
+PreparedCloud prepare_cloud(const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
+                            int normal_neighbours) {
+  const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
+  PreparedCloud c;
   // ---- finite points, ROI
-  rep.points_total = P_in.rows();
+  c.points_total = P_in.rows();
   std::vector<Eigen::Index> compact(std::size_t(P_in.rows()), -1);
   std::vector<Eigen::Index> keep;
   keep.reserve(std::size_t(P_in.rows()));
@@ -74,14 +74,14 @@ void prepare_cloud(FitState& s, const Eigen::MatrixX3d& P_in, const Eigen::Matri
       compact[std::size_t(i)] = Eigen::Index(keep.size());
       keep.push_back(i);
     }
-  rep.points_skipped_nonfinite = P_in.rows() - Eigen::Index(keep.size());
+  c.points_skipped_nonfinite = P_in.rows() - Eigen::Index(keep.size());
   if (keep.empty())
     throw InvalidInput(who + "the input cloud has no finite points (all " + std::to_string(P_in.rows()) + " are NaN/Inf)");
-  const Eigen::Index np = s.np = Eigen::Index(keep.size());
-  Eigen::MatrixX3d& P = s.P;
+  const Eigen::Index np = c.np = Eigen::Index(keep.size());
+  Eigen::MatrixX3d& P = c.P;
   P.resize(np, 3);
   for (Eigen::Index i = 0; i < np; ++i) P.row(i) = P_in.row(keep[std::size_t(i)]);
-  std::vector<char>& roi_ok = s.roi_ok;
+  std::vector<char>& roi_ok = c.roi_ok;
   roi_ok.assign(std::size_t(np), 1);
   for (Eigen::Index e : roi.exclude_cloud_points) {
     if (e < 0 || e >= P_in.rows())
@@ -91,33 +91,46 @@ void prepare_cloud(FitState& s, const Eigen::MatrixX3d& P_in, const Eigen::Matri
   }
   for (Eigen::Index i = 0; i < np; ++i)
     if (inside(P.row(i).transpose(), roi.exclude_cloud_spheres, roi.exclude_cloud_boxes)) roi_ok[std::size_t(i)] = 0;
-  rep.points_excluded = np - std::count(roi_ok.begin(), roi_ok.end(), 1);
-  s.cloud_lo = Eigen::Vector3d::Constant(1e300);
-  s.cloud_hi = -s.cloud_lo;
+  c.points_excluded = np - std::count(roi_ok.begin(), roi_ok.end(), 1);
+  c.lo = Eigen::Vector3d::Constant(1e300);
+  c.hi = -c.lo;
   for (Eigen::Index i = 0; i < np; ++i)
     if (roi_ok[std::size_t(i)]) {
-      s.cloud_lo = s.cloud_lo.cwiseMin(P.row(i).transpose());
-      s.cloud_hi = s.cloud_hi.cwiseMax(P.row(i).transpose());
+      c.lo = c.lo.cwiseMin(P.row(i).transpose());
+      c.hi = c.hi.cwiseMax(P.row(i).transpose());
     }
-  if (rep.points_excluded == np) throw InvalidInput(who + "the region of interest excludes every cloud point");
-  rep.bbox_diagonal = (s.cloud_hi - s.cloud_lo).norm();
-  s.diag = rep.bbox_diagonal;
-  if (!(s.diag > 0)) throw InvalidInput(who + "the cloud's points all coincide; nothing to fit");
+  if (c.points_excluded == np) throw InvalidInput(who + "the region of interest excludes every cloud point");
+  c.diag = (c.hi - c.lo).norm();
+  if (!(c.diag > 0)) throw InvalidInput(who + "the cloud's points all coincide; nothing to fit");
   // ---- search tree, spacing, normals
   auto t0 = Clock::now();
-  s.search = PointSearch(P);
-  rep.point_spacing = median_spacing(s.search);
-  rep.t_search = seconds_since(t0);
+  c.search = PointSearch(P);
+  c.spacing = median_spacing(c.search);
+  c.t_search = seconds_since(t0);
   t0 = Clock::now();
-  s.orient = orient_normals;
   if (N_in.rows() == 0) {
-    s.N = estimate_normals_pca(s.search, params.normal_neighbours);
-    rep.normals_estimated = s.orient = true;
+    c.N = estimate_normals_pca(c.search, normal_neighbours);
+    c.normals_estimated = true;
   } else {
-    s.N.resize(np, 3);
-    for (Eigen::Index i = 0; i < np; ++i) s.N.row(i) = N_in.row(keep[std::size_t(i)]).normalized();
+    c.N.resize(np, 3);
+    for (Eigen::Index i = 0; i < np; ++i) c.N.row(i) = N_in.row(keep[std::size_t(i)]).normalized();
   }
-  rep.t_normals = seconds_since(t0);
+  c.t_normals = seconds_since(t0);
+  return c;
+}
+
+void use_cloud(FitState& s, const FitParameters& params, bool orient_normals) {
+  const PreparedCloud& c = s.cloud;
+  FitReport& rep = s.rep;
+  rep.points_total = c.points_total;
+  rep.points_skipped_nonfinite = c.points_skipped_nonfinite;
+  rep.points_excluded = c.points_excluded;
+  rep.bbox_diagonal = c.diag;
+  rep.point_spacing = c.spacing;
+  rep.t_search = c.t_search;
+  rep.t_normals = c.t_normals;
+  rep.normals_estimated = c.normals_estimated;
+  s.orient = orient_normals || c.normals_estimated;
   derive_parameters(s, params);
 }
 

@@ -33,10 +33,27 @@
 namespace tbsp {
 namespace fit_impl {
 
+/// The input cloud as the stages use it (prepare_cloud): finite points, ROI, search tree, spacing
+/// and normals (given, or PCA). It depends only on the cloud, the ROI and normal_neighbours, so
+/// the passes and hypotheses of one fit without markers share one (fit_template).
+struct PreparedCloud {
+  Eigen::Index np = 0;        ///< finite points
+  Eigen::MatrixX3d P, N;      ///< np rows; N unit, not yet oriented by the template
+  std::vector<char> roi_ok;   ///< per point: inside the region of interest
+  Eigen::Vector3d lo, hi;     ///< bounding box of the ROI points
+  double diag = 0;            ///< its diagonal
+  PointSearch search;         ///< over P
+  double spacing = 0;         ///< median nearest-neighbour spacing
+  bool normals_estimated = false;
+  Eigen::Index points_total = 0, points_skipped_nonfinite = 0, points_excluded = 0;
+  double t_search = 0, t_normals = 0;  ///< seconds the preparation took
+};
+
 struct FitState {
   FitState(const TriMesh& t, const std::vector<FitMarker>& m, const ProgressCallback& p, FitReport& r,
-           std::vector<VertexStatus>& st)
-      : markers(m), progress(p), rep(r), status(st), u(r.used), templ_(&t) {}
+           std::vector<VertexStatus>& st, const PreparedCloud& c)
+      : markers(m), progress(p), rep(r), status(st), u(r.used), cloud(c), np(c.np), P(c.P), N(c.N), roi_ok(c.roi_ok),
+        cloud_lo(c.lo), cloud_hi(c.hi), diag(c.diag), search(c.search), templ_(&t) {}
 
   const std::vector<FitMarker>& markers;
   const ProgressCallback& progress;
@@ -45,13 +62,16 @@ struct FitState {
   FitParameters& u;  ///< the parameters used (rep.used: automatic values filled in)
   const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
 
-  // the cloud: finite points only (P, N: np rows), roi_ok per point
-  Eigen::Index np = 0;
-  Eigen::MatrixX3d P, N;
-  std::vector<char> roi_ok;
-  Eigen::Vector3d cloud_lo, cloud_hi;
-  double diag = 0;  ///< bounding-box diagonal of the ROI points
-  PointSearch search;
+  // the cloud (finite points only: P, N have np rows), roi_ok per point; shared, read-only,
+  // except N: this fit's copy, oriented by its posed template (orient_cloud_normals)
+  const PreparedCloud& cloud;
+  const Eigen::Index np;
+  const Eigen::MatrixX3d& P;
+  Eigen::MatrixX3d N;
+  const std::vector<char>& roi_ok;
+  const Eigen::Vector3d cloud_lo, cloud_hi;
+  const double diag;  ///< bounding-box diagonal of the ROI points
+  const PointSearch& search;
   bool orient = false;  ///< orient N by the posed template (estimated or unreliable normals)
   double cos_max = 0;   ///< cos θ_max
 
@@ -95,9 +115,12 @@ struct FitState {
 };
 
 // ---- fit_setup.cpp
-/// Finite points, ROI, search tree, spacing, normals (given or PCA) and the derived parameters.
-void prepare_cloud(FitState& s, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
-                   const FitParameters& params, bool orient_normals);
+/// Finite points, ROI, search tree, spacing, normals (given, or PCA with `normal_neighbours`).
+/// Throws InvalidInput naming the problem (no finite point, ROI excludes all, one point).
+PreparedCloud prepare_cloud(const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
+                            int normal_neighbours);
+/// The report's cloud fields, whether to orient the normals, and the derived parameters.
+void use_cloud(FitState& s, const FitParameters& params, bool orient_normals);
 /// Marker targets and the template mask; throws InvalidInput naming the marker / vertex.
 void prepare_markers(FitState& s, const Eigen::MatrixX3d& P_in, const RegionOfInterest& roi);
 

@@ -17,13 +17,21 @@
 namespace tbsp {
 namespace {
 
+// What the passes and hypotheses of one fit without markers share: they fit the same template
+// to the same cloud, so the prepared cloud and the similarity alignment are computed once (by
+// the first pass) and reused; results are identical to computing them each time.
+struct SharedWork {
+  std::optional<fit_impl::PreparedCloud> cloud;
+  std::optional<SimilarityIcpResult> alignment;
+};
+
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                    const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                    TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                   bool orient_normals, int coarse_prepass, std::optional<SimilarityIcpResult>* alignment = nullptr);
+                   bool orient_normals, int coarse_prepass, SharedWork* shared = nullptr);
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                         bool orient_normals, int coarse_prepass, std::optional<SimilarityIcpResult>* alignment);
+                         bool orient_normals, int coarse_prepass, SharedWork& shared);
 
 // The part [lo, hi] of `progress` (empty when `progress` is).
 ProgressCallback sub_progress(const ProgressCallback& progress, double lo, double hi) {
@@ -51,9 +59,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     for (int c : params.coarse_prepass_nodes)
       if (c < params.coarse_nodes && std::find(prepass.begin(), prepass.end(), c) == prepass.end()) prepass.push_back(c);
   const double nh = double(prepass.size());
-  std::optional<SimilarityIcpResult> alignment;  // the same for every hypothesis
+  SharedWork shared;  // the same for every pass and hypothesis
   FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, result, status, sub_progress(progress, 0.0, 1.0 / nh), orient_normals, 0,
-                                 &alignment);
+                                 shared);
   if (params.coarse_nodes > 0) {
     std::vector<double> scores{rep.tail_mean};
     std::size_t kept = 0;
@@ -61,7 +69,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       TriMesh r2;
       std::vector<VertexStatus> s2;
       FitReport rep2 = markerless_fit(templ, P_in, N_in, roi, params, r2, s2, sub_progress(progress, double(h) / nh, double(h + 1) / nh),
-                                      orient_normals, prepass[h], &alignment);
+                                      orient_normals, prepass[h], shared);
       scores.push_back(rep2.tail_mean);
       if (rep2.tail_mean < rep.tail_mean) {  // ties keep the earlier hypothesis
         rep = std::move(rep2);
@@ -93,14 +101,14 @@ namespace {
 // Without markers: the aligned fit, then its matched vertices as markers of a second fit.
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                         bool orient_normals, int coarse_prepass, std::optional<SimilarityIcpResult>* alignment) {
+                         bool orient_normals, int coarse_prepass, SharedWork& shared) {
   const auto t_all = Clock::now();
   FitParameters first = params;
   first.detail_rounds = 0;  // (2 rounds here: clean Hausdorff 0.50-0.91 % for 0.61-0.93 % over the
                             // roughly placed bunny seeds 1-5, the same scale bias, twice the time)
   TriMesh r1;
   std::vector<VertexStatus> s1;
-  const FitReport rep1 = fit_once(templ, P_in, N_in, {}, roi, first, r1, s1, sub_progress(progress, 0.0, 0.4), orient_normals, coarse_prepass, alignment);
+  const FitReport rep1 = fit_once(templ, P_in, N_in, {}, roi, first, r1, s1, sub_progress(progress, 0.0, 0.4), orient_normals, coarse_prepass, &shared);
   std::vector<int> matched;
   for (std::size_t v = 0; v < s1.size(); ++v)
     if (s1[v] == VertexStatus::Matched) matched.push_back(int(v));
@@ -117,7 +125,8 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
     m.position = r1.V.row(v).transpose();
     auto_markers.push_back(m);
   }
-  FitReport rep = fit_once(templ, P_in, N_in, auto_markers, roi, params, result, status, sub_progress(progress, 0.4, 1.0), orient_normals, coarse_prepass);
+  FitReport rep = fit_once(templ, P_in, N_in, auto_markers, roi, params, result, status, sub_progress(progress, 0.4, 1.0), orient_normals,
+                           coarse_prepass, &shared);
   rep.aligned_without_markers = true;
   rep.alignment = rep1.alignment;
   rep.alignment_rotation_deg = rep1.alignment_rotation_deg;
@@ -135,25 +144,29 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                        const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                        TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                       bool orient_normals, int coarse_prepass, std::optional<SimilarityIcpResult>* alignment) {
+                       bool orient_normals, int coarse_prepass, SharedWork* shared) {
   const auto t_all = Clock::now();
   // one BLAS thread: no contention with our OpenMP loops (blas_threads.h)
   const ScopedBlasThreads blas_threads(1);
-  FitReport rep;
-  fit_impl::FitState s(templ, markers, progress, rep, status);
-  s.coarse_prepass = coarse_prepass;
-  s.alignment_cache = alignment;
+  const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
   std::string why;
-  if (!params.isValid(&why)) throw InvalidInput(s.who + "invalid parameters: " + why);
+  if (!params.isValid(&why)) throw InvalidInput(who + "invalid parameters: " + why);
   MeshRequirements req;
   req.allow_nonmanifold = !params.remeshing;
   require_valid_mesh(templ, req, "tbsp::TemplateFitting::setInputTemplate");
-  if (P_in.rows() == 0) throw InvalidInput(s.who + "the input cloud is empty; give a cloud with points");
+  if (P_in.rows() == 0) throw InvalidInput(who + "the input cloud is empty; give a cloud with points");
   if (N_in.rows() != 0 && N_in.rows() != P_in.rows())
-    throw InvalidInput(s.who + "the normals have " + std::to_string(N_in.rows()) + " rows for " +
-                       std::to_string(P_in.rows()) + " points");
+    throw InvalidInput(who + "the normals have " + std::to_string(N_in.rows()) + " rows for " + std::to_string(P_in.rows()) +
+                       " points");
   report_progress(progress, 0.0, "prepare");
-  fit_impl::prepare_cloud(s, P_in, N_in, roi, params, orient_normals);
+  std::optional<fit_impl::PreparedCloud> own;
+  std::optional<fit_impl::PreparedCloud>& cloud = shared ? shared->cloud : own;
+  if (!cloud) cloud = fit_impl::prepare_cloud(P_in, N_in, roi, params.normal_neighbours);
+  FitReport rep;
+  fit_impl::FitState s(templ, markers, progress, rep, status, *cloud);
+  s.coarse_prepass = coarse_prepass;
+  s.alignment_cache = shared ? &shared->alignment : nullptr;
+  fit_impl::use_cloud(s, params, orient_normals);
   fit_impl::prepare_markers(s, P_in, roi);
   TriMesh aligned;
   if (markers.empty() && params.align_without_markers) {  // a template roughly in place: similarity alignment first
