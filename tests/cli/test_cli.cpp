@@ -19,13 +19,13 @@ using namespace tbsp;
 
 namespace {
 using test::CliResult;
-CliResult run(const std::string& args, const std::filesystem::path& dir) { return test::run_cli(args, dir); }
+using test::run_cli;
 }  // namespace
 
 TEST(Cli, DeformWritesMeshAndReport) {
   const auto dir = test::temp_dir("cli_ok");
   const std::string out = (dir / "bent.ply").string(), rep = (dir / "r.json").string();
-  const CliResult r = run("deform -q --mesh " + test::sample("bumpy_bar.off") + " --constraints " + test::sample("bend_90.json") +
+  const CliResult r = run_cli("deform -q --mesh " + test::sample("bumpy_bar.off") + " --constraints " + test::sample("bend_90.json") +
                         " --out " + out + " --rotation-field --check-self-intersections --report " + rep,
                     dir);
   ASSERT_EQ(r.code, 0) << r.err;
@@ -58,7 +58,7 @@ TEST(Cli, DeformReportsTheCrossingsItMade) {
   for (Eigen::Index i = 1; i < m.V.rows(); ++i)
     if (m.V.row(i).dot(v0) < -0.3) c["constraints"].push_back({{"vertex", i}, {"target", {m.V(i, 0), m.V(i, 1), m.V(i, 2)}}});
   std::ofstream(cons) << c.dump();
-  const CliResult r = run("deform --mesh " + in + " --constraints " + cons + " --out " + out + " --check-self-intersections --report " + rep, dir);
+  const CliResult r = run_cli("deform --mesh " + in + " --constraints " + cons + " --out " + out + " --check-self-intersections --report " + rep, dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("self-intersecting face pairs: 0 in the input"), std::string::npos) << r.out;
   nlohmann::json j;
@@ -76,25 +76,25 @@ TEST(Cli, MalformedInputsFailClearlyAndKeepExistingOutputs) {
   // truncated mesh
   const std::string bad = (dir / "bad.off").string();
   std::ofstream(bad) << "OFF\n4 2 0\n0 0 0\n1 0 0\n";
-  CliResult r = run("deform --mesh " + bad + " --constraints " + test::sample("bend_90.json") + " --out " + out, dir);
+  CliResult r = run_cli("deform --mesh " + bad + " --constraints " + test::sample("bend_90.json") + " --out " + out, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find(bad), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("truncated"), std::string::npos) << r.err;
   // constraint on a missing vertex
   const std::string cons = (dir / "c.json").string();
   std::ofstream(cons) << R"({"constraints": [{"vertex": 5, "target": [0,0,0]}, {"vertex": 99999, "target": [1,2,3]}]})";
-  r = run("deform --mesh " + test::sample("bumpy_bar.off") + " --constraints " + cons + " --out " + out, dir);
+  r = run_cli("deform --mesh " + test::sample("bumpy_bar.off") + " --constraints " + cons + " --out " + out, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("constraints[1].vertex"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("99999"), std::string::npos) << r.err;
   // invalid JSON
   std::ofstream(cons) << "{ not json";
-  r = run("deform --mesh " + test::sample("bumpy_bar.off") + " --constraints " + cons + " --out " + out, dir);
+  r = run_cli("deform --mesh " + test::sample("bumpy_bar.off") + " --constraints " + cons + " --out " + out, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("not valid JSON"), std::string::npos) << r.err;
   // under-determined: only a plane constraint
   std::ofstream(cons) << R"({"constraints": [{"vertex": 5, "type": "plane", "point": [0,0,0], "normal": [0,0,1]}]})";
-  r = run("deform --mesh " + test::sample("bumpy_bar.off") + " --constraints " + cons + " --out " + out, dir);
+  r = run_cli("deform --mesh " + test::sample("bumpy_bar.off") + " --constraints " + cons + " --out " + out, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("free to translate"), std::string::npos) << r.err;
   EXPECT_EQ(std::filesystem::last_write_time(out), before) << "a failed run must not touch the existing output";
@@ -102,8 +102,8 @@ TEST(Cli, MalformedInputsFailClearlyAndKeepExistingOutputs) {
   // validate: exit 4 with --strict on a mesh with problems
   const std::string dup = (dir / "dup.off").string();
   std::ofstream(dup) << "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 2\n";
-  EXPECT_EQ(run("validate --strict " + dup, dir).code, 4);
-  EXPECT_EQ(run("validate " + dup, dir).code, 0);
+  EXPECT_EQ(run_cli("validate --strict " + dup, dir).code, 4);
+  EXPECT_EQ(run_cli("validate " + dup, dir).code, 0);
   std::filesystem::remove_all(dir);
 }
 
@@ -114,10 +114,10 @@ TEST(Cli, ValidateCountsSelfIntersections) {
   write_mesh(good, m);
   m.V.row(0) *= -1.5;  // a vertex pulled through the far side of the sphere
   write_mesh(poked, m);
-  CliResult r = run("validate --self-intersections --strict " + good, dir);
+  CliResult r = run_cli("validate --self-intersections --strict " + good, dir);
   EXPECT_EQ(r.code, 0) << r.out << r.err;
   EXPECT_NE(r.out.find("self-intersections: 0 pairs"), std::string::npos) << r.out;
-  r = run("validate --self-intersections " + poked + " --json " + js, dir);
+  r = run_cli("validate --self-intersections " + poked + " --json " + js, dir);
   EXPECT_EQ(r.code, 0) << r.err;  // a report, not a failure, without --strict
   nlohmann::json j;
   std::ifstream(js) >> j;
@@ -125,12 +125,12 @@ TEST(Cli, ValidateCountsSelfIntersections) {
   const int n = j["self_intersections"].get<int>();
   EXPECT_GT(n, 0);
   EXPECT_EQ(int(j["self_intersecting_pairs"].size()), n);
-  EXPECT_EQ(run("validate --self-intersections --strict " + poked, dir).code, 4);
-  EXPECT_EQ(run("validate --strict " + poked, dir).code, 0);  // not asked for: not checked
+  EXPECT_EQ(run_cli("validate --self-intersections --strict " + poked, dir).code, 4);
+  EXPECT_EQ(run_cli("validate --strict " + poked, dir).code, 0);  // not asked for: not checked
   // a mesh the test cannot run on: said so, not counted as 0
   const std::string dup = (dir / "dup.off").string();
   std::ofstream(dup) << "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 2\n";
-  r = run("validate --self-intersections " + dup + " --json " + js, dir);
+  r = run_cli("validate --self-intersections " + dup + " --json " + js, dir);
   EXPECT_EQ(r.code, 0);
   EXPECT_NE(r.out.find("not checked"), std::string::npos) << r.out;
   std::ifstream(js) >> j;
@@ -149,7 +149,7 @@ TEST(Cli, ValidateAgainstAReference) {
   write_mesh(fit, m);
   m.F.col(1).swap(m.F.col(2));  // turned inside out
   write_mesh(inv, m);
-  CliResult r = run("validate --strict " + fit + " --against " + ref + " --probe-distance 0.05 --json " + js, dir);
+  CliResult r = run_cli("validate --strict " + fit + " --against " + ref + " --probe-distance 0.05 --json " + js, dir);
   EXPECT_EQ(r.code, 0) << r.out << r.err;
   EXPECT_NE(r.out.find("0 point into it"), std::string::npos) << r.out;
   nlohmann::json j;
@@ -157,15 +157,15 @@ TEST(Cli, ValidateAgainstAReference) {
   EXPECT_EQ(j["against"]["consistent"].get<int>(), m.F.rows());
   EXPECT_EQ(j["against"]["flipped"].get<int>(), 0);
   EXPECT_DOUBLE_EQ(j["against"]["probe_distance"].get<double>(), 0.05);
-  r = run("validate " + inv + " --against " + ref + " --probe-distance 0.05 --json " + js, dir);
+  r = run_cli("validate " + inv + " --against " + ref + " --probe-distance 0.05 --json " + js, dir);
   EXPECT_EQ(r.code, 0) << r.err;  // a report, not a failure, without --strict
   std::ifstream(js) >> j;
   EXPECT_EQ(j["against"]["flipped"].get<int>(), m.F.rows());
   EXPECT_EQ(int(j["against"]["flipped_faces"].size()), m.F.rows());
-  EXPECT_EQ(run("validate --strict " + inv + " --against " + ref + " --probe-distance 0.05", dir).code, 4);
+  EXPECT_EQ(run_cli("validate --strict " + inv + " --against " + ref + " --probe-distance 0.05", dir).code, 4);
   // the default probe (0.1 % of the reference diagonal, 0.0035) does not reach them: not judged,
   // never counted as flipped
-  r = run("validate " + inv + " --against " + ref + " --json " + js, dir);
+  r = run_cli("validate " + inv + " --against " + ref + " --json " + js, dir);
   EXPECT_EQ(r.code, 0) << r.out;
   std::ifstream(js) >> j;
   EXPECT_NEAR(j["against"]["probe_distance"].get<double>(), 0.001 * 2.04 * std::sqrt(3.0), 1e-5);
@@ -173,19 +173,19 @@ TEST(Cli, ValidateAgainstAReference) {
   // bad input: a reference without faces, a missing one, a probe that is not positive
   std::ofstream(cloud) << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                           "end_header\n0 0 0\n1 0 0\n0 1 0\n";
-  r = run("validate " + fit + " --against " + cloud, dir);
+  r = run_cli("validate " + fit + " --against " + cloud, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("cloud.ply has no faces"), std::string::npos) << r.err;
-  r = run("validate " + fit + " --against " + (dir / "missing.ply").string(), dir);
+  r = run_cli("validate " + fit + " --against " + (dir / "missing.ply").string(), dir);
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.err.find("missing.ply"), std::string::npos) << r.err;
-  EXPECT_NE(run("validate " + fit + " --against " + ref + " --probe-distance -1", dir).code, 0);
+  EXPECT_NE(run_cli("validate " + fit + " --against " + ref + " --probe-distance -1", dir).code, 0);
   std::filesystem::remove_all(dir);
 }
 
 TEST(Cli, DemoProducesOutputs) {
   const auto dir = test::temp_dir("cli_demo");
-  const CliResult r = run("demo -q --out " + (dir / "o").string(), dir);
+  const CliResult r = run_cli("demo -q --out " + (dir / "o").string(), dir);
   ASSERT_EQ(r.code, 0) << r.err;
   for (const char* f : {"fitted.ply", "fit_report.json", "fit.png", "bent_rotation_field.ply", "bent_linear.ply", "demo.png",
                         "report.json"})
@@ -211,7 +211,7 @@ TEST(Cli, RenderDrawsPointCloudsWithAColourBar) {
   std::ofstream sc(dir / "s.txt");
   for (Eigen::Index i = 0; i < cloud.V.rows(); ++i) sc << cloud.V(i, 0) << "\n";
   sc.close();
-  CliResult r = run("render " + in + " --scalar " + (dir / "s.txt").string() + " --out " + png, dir);
+  CliResult r = run_cli("render " + in + " --scalar " + (dir / "s.txt").string() + " --out " + png, dir);
   ASSERT_EQ(r.code, 0) << r.err;
   const cv::Mat img = cv::imread(png);
   ASSERT_FALSE(img.empty());
@@ -231,7 +231,7 @@ TEST(Cli, RenderDrawsPointCloudsWithAColourBar) {
   EXPECT_GT(blue, 100);
   // a wrong number of scalar values is an error naming the counts
   std::ofstream(dir / "short.txt") << "1\n2\n";
-  r = run("render " + in + " --scalar " + (dir / "short.txt").string() + " --out " + png, dir);
+  r = run_cli("render " + in + " --scalar " + (dir / "short.txt").string() + " --out " + png, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("2 values for the 642 points"), std::string::npos) << r.err;
   std::filesystem::remove_all(dir);

@@ -14,26 +14,26 @@ using namespace tbsp;
 
 namespace {
 using test::CliResult;
-CliResult run(const std::string& args, const std::filesystem::path& dir) { return test::run_cli(args, dir); }
+using test::run_cli;
 }  // namespace
 
 TEST(CliCapture, SynthStudioThenReplayAndMissingFrames) {
   const auto dir = test::temp_dir("cli_studio");
   const std::string st = (dir / "studio").string();
-  CliResult r = run("synth-studio -q --out " + st + " --cameras 3 --width 200 --height 160 --frames 3 --range-scans --detail 0", dir);
+  CliResult r = run_cli("synth-studio -q --out " + st + " --cameras 3 --width 200 --height 160 --frames 3 --range-scans --detail 0", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(std::filesystem::exists(st + "/scans/cam1/0002.pcd"));
-  r = run("replay " + st, dir);
+  r = run_cli("replay " + st, dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("3 cameras"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("3 frames streamed"), std::string::npos) << r.out;
   // A missing frame: replay lists it by name and exits 2.
   std::filesystem::remove(st + "/images/cam2/0001.png");
-  r = run("replay " + st + "/studio.yaml", dir);
+  r = run_cli("replay " + st + "/studio.yaml", dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.out.find("images/cam2/0001.png"), std::string::npos) << r.out;
   // Bad options are refused before anything is written.
-  r = run("synth-studio -q --out " + (dir / "bad").string() + " --cameras 0", dir);
+  r = run_cli("synth-studio -q --out " + (dir / "bad").string() + " --cameras 0", dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("cameras must be"), std::string::npos) << r.err;
 }
@@ -42,21 +42,21 @@ TEST(CliCapture, ReplayRecordingsToClouds) {
   const auto dir = test::temp_dir("cli_replay");
   const std::string oni = test::shared("capture/3DJ__3DJ_Test/bin/data/test.oni");
   TBSP_REQUIRE_FILE(oni);
-  CliResult r = run("replay " + oni + " --out " + (dir / "oni").string() + " --last 2", dir);
+  CliResult r = run_cli("replay " + oni + " --out " + (dir / "oni").string() + " --last 2", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(std::filesystem::exists(dir / "oni" / "cloud_0002.pcd"));
   EXPECT_FALSE(std::filesystem::exists(dir / "oni" / "cloud_0003.pcd"));
   EXPECT_NE(r.out.find("12 frames"), std::string::npos) << r.out;
   // A folder of 16-bit depth images needs intrinsics.
   const std::string depth = test::shared("capture/gaoxiang12__slambook2/ch12/dense_RGBD/data/depth");
-  r = run("replay " + depth, dir);
+  r = run_cli("replay " + depth, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("--intrinsics"), std::string::npos) << r.err;
-  r = run("replay " + depth + " --intrinsics 481.2,-480,319.5,239.5 --depth-scale 0.0002 --format ply --out " + (dir / "d").string(), dir);
+  r = run_cli("replay " + depth + " --intrinsics 481.2,-480,319.5,239.5 --depth-scale 0.0002 --format ply --out " + (dir / "d").string(), dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(std::filesystem::exists(dir / "d" / "cloud_0004.ply"));
   // Empty recording: clear error, exit 2.
-  r = run("replay " + test::shared("capture/bloyot__Kinect-Gesture-Recognition/recording.oni"), dir);
+  r = run_cli("replay " + test::shared("capture/bloyot__Kinect-Gesture-Recognition/recording.oni"), dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("recording.oni"), std::string::npos) << r.err;
 }

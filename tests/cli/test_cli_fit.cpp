@@ -19,7 +19,7 @@
 using namespace tbsp;
 
 namespace {
-int run(const std::string& args, const std::filesystem::path& dir, std::string* err = nullptr) {
+int run_code(const std::string& args, const std::filesystem::path& dir, std::string* err = nullptr) {
   const std::string errf = (dir / "stderr.txt").string();
   const int rc = std::system((std::string(TBSP_CLI) + " " + args + " >/dev/null 2>" + errf).c_str());
   if (err) {
@@ -59,7 +59,7 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   const std::string out = (dir / "fit.ply").string(), rep = (dir / "r.json").string(), st = (dir / "status.txt").string(),
                     png = (dir / "fit.png").string();
   std::string err;
-  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+  ASSERT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
                     " --out " + out + " --report " + rep + " --status " + st + " --png " + png,
                 dir, &err),
             0)
@@ -84,7 +84,7 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_EQ(j["metrics"]["self_intersections"].get<int>(), -1);  // not checked without --fairing
   // detail rounds: same connectivity, the report says what they did, the fit is not worse
   const std::string out2 = (dir / "fit_detail.ply").string(), rep2 = (dir / "r2.json").string();
-  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+  ASSERT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
                     " --out " + out2 + " --report " + rep2 + " --detail-rounds 2 --consistent-normals --check-self-intersections",
                 dir, &err),
             0)
@@ -107,14 +107,14 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_EQ(j2["counts"]["detail_surface_constraints"].get<long>(), 0);  // off by default
   EXPECT_GT(j2["timings_s"]["detail"].get<double>(), 0.0);
   EXPECT_LE(j2["metrics"]["p99"].get<double>(), j["metrics"]["p99"].get<double>());
-  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+  EXPECT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
                     " --out " + out2 + " --detail-rounds -1",
                 dir, &err),
             2);
   EXPECT_NE(err.find("detail_rounds"), std::string::npos) << err;
   // the previous detail matching (§5.3 kernel targets + per-face constraints) stays selectable
   const std::string rep3 = (dir / "r3.json").string();
-  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+  ASSERT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
                     " --out " + out2 + " --report " + rep3 +
                     " --detail-rounds 1 --detail-kernel-targets --detail-surface-weight 4 --no-pleat-collapse",
                 dir, &err),
@@ -126,14 +126,14 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_FALSE(j3["parameters"]["pleat_collapse"].get<bool>());
   EXPECT_EQ(j3["counts"]["detail_points_tracked"].get<long>(), 0);
   EXPECT_GT(j3["counts"]["detail_surface_constraints"].get<long>(), 0);
-  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+  EXPECT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
                     " --out " + out2 + " --detail-rounds 1 --detail-radius-factor 0.1",
                 dir, &err),
             2);
   EXPECT_NE(err.find("detail_radius_factor"), std::string::npos) << err;
   // the coarse stage: on request, reported, same connectivity; an invalid node count is refused
   const std::string rep4 = (dir / "r4.json").string();
-  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+  ASSERT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
                     " --out " + out2 + " --report " + rep4 + " --coarse-nodes 200",
                 dir, &err),
             0)
@@ -146,14 +146,14 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_GT(j4["timings_s"]["coarse_stage"].get<double>(), 0.0);
   EXPECT_EQ(read_mesh(out2).F, s.templ.F);
   EXPECT_FALSE(j.contains("coarse_stage"));  // off by default
-  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
+  EXPECT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
                     " --out " + out2 + " --coarse-nodes 2",
                 dir, &err),
             2);
   EXPECT_NE(err.find("coarse_nodes"), std::string::npos) << err;
   // without markers the coarse stage runs its hypotheses and the report says which was kept
   const std::string rep5 = (dir / "r5.json").string();
-  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out2 + " --report " + rep5 +
+  ASSERT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out2 + " --report " + rep5 +
                     " --coarse-nodes 200 --coarse-prepass-nodes 50,400",
                 dir, &err),
             0)
@@ -169,15 +169,15 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_LE(j5["metrics"]["tail_mean"].get<double>(), std::min(tails[0], tails[1]));
   EXPECT_GE(j5["metrics"]["tail_mean"].get<double>(), j5["metrics"]["p99"].get<double>());
   EXPECT_EQ(j5["parameters"]["coarse_prepass_nodes"].get<std::vector<int>>(), (std::vector<int>{50, 400}));
-  EXPECT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out2 + " --coarse-nodes 200 --coarse-prepass-nodes 100,2", dir, &err), 2);
+  EXPECT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out2 + " --coarse-nodes 200 --coarse-prepass-nodes 100,2", dir, &err), 2);
   EXPECT_NE(err.find("coarse_prepass_nodes"), std::string::npos) << err;
   // bad input: a marker on a missing template vertex -> exit 2, message names it, output kept
   const auto before = std::filesystem::last_write_time(out);
   std::ofstream(dir / "bad.json") << R"({"markers": [{"template_vertex": 999999, "cloud_index": 0}]})";
-  EXPECT_EQ(run("fit --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "bad.json").string() + " --out " + out, dir, &err), 2);
+  EXPECT_EQ(run_code("fit --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "bad.json").string() + " --out " + out, dir, &err), 2);
   EXPECT_NE(err.find("template vertex 999999 does not exist"), std::string::npos) << err;
   std::ofstream(dir / "bad.json") << R"({"markers": [{"template_vertex": 3, "cloud_index": 1, "position": [0,0,0]}]})";
-  EXPECT_EQ(run("fit --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "bad.json").string() + " --out " + out, dir, &err), 2);
+  EXPECT_EQ(run_code("fit --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "bad.json").string() + " --out " + out, dir, &err), 2);
   EXPECT_NE(err.find("markers[0]"), std::string::npos) << err;
   EXPECT_EQ(std::filesystem::last_write_time(out), before);
   if (!std::getenv("TBSP_KEEP_TEST_OUTPUT")) std::filesystem::remove_all(dir);
@@ -200,7 +200,7 @@ TEST(CliFit, WithoutMarkersARoughlyPlacedTemplateIsAlignedThenFitted) {
   const std::string cloud = (dir / "scan.pcd").string(), out = (dir / "fit.ply").string(), rep = (dir / "r.json").string();
   write_scan(s, cloud);
   std::string err;
-  ASSERT_EQ(run("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out + " --report " + rep, dir, &err), 0) << err;
+  ASSERT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --out " + out + " --report " + rep, dir, &err), 0) << err;
   nlohmann::json j;
   std::ifstream(rep) >> j;
   ASSERT_TRUE(j.contains("alignment")) << j.dump(1);

@@ -18,7 +18,7 @@ using namespace tbsp;
 
 namespace {
 using test::CliResult;
-CliResult run(const std::string& args, const std::filesystem::path& dir) { return test::run_cli(args, dir); }
+using test::run_cli;
 
 std::string slurp(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -40,7 +40,7 @@ std::string fit_args(const std::filesystem::path& dir) {
 // propagated displacements from an interpolator that was never set up).
 TEST(CliRobustness, FitWithEveryVertexMatchedDoesNotCrash) {
   const auto dir = test::temp_dir("rob_allmatched");
-  const CliResult r = run(fit_args(dir) + " --r-max 0.5 --report " + (dir / "r.json").string(), dir);
+  const CliResult r = run_cli(fit_args(dir) + " --r-max 0.5 --report " + (dir / "r.json").string(), dir);
   ASSERT_EQ(r.code, 0) << r.err;
   const nlohmann::json j = nlohmann::json::parse(slurp((dir / "r.json").string()));
   // a match radius of half the bar's length reaches the data from every vertex
@@ -59,7 +59,7 @@ TEST(CliRobustness, FitWithAFarOutlierOrAFarFreeMarkerFinishes) {
   scan.N.conservativeResize(scan.N.rows() + 1, 3);
   scan.N.row(scan.N.rows() - 1) << 0.0, 0.0, 1.0;
   write_mesh((dir / "outlier.ply").string(), scan);
-  CliResult r = run("fit -q --template " + kTemplate + " --cloud " + (dir / "outlier.ply").string() + " --markers " + kMarkers +
+  CliResult r = run_cli("fit -q --template " + kTemplate + " --cloud " + (dir / "outlier.ply").string() + " --markers " + kMarkers +
                         " --out " + (dir / "a.ply").string(),
                     dir);
   EXPECT_EQ(r.code, 0) << r.err;
@@ -67,7 +67,7 @@ TEST(CliRobustness, FitWithAFarOutlierOrAFarFreeMarkerFinishes) {
   nlohmann::json mk = nlohmann::json::parse(slurp(kMarkers));
   mk["markers"].push_back({{"template_vertex", 5}, {"position", {1e6, 0, 0}}});
   std::ofstream(dir / "far.json") << mk.dump();
-  r = run("fit --template " + kTemplate + " --cloud " + kScan + " --markers " + (dir / "far.json").string() + " --out " +
+  r = run_cli("fit --template " + kTemplate + " --cloud " + kScan + " --markers " + (dir / "far.json").string() + " --out " +
               (dir / "b.ply").string(),
           dir);
   EXPECT_EQ(r.code, 0) << r.err;
@@ -78,7 +78,7 @@ TEST(CliRobustness, FitWithAFarOutlierOrAFarFreeMarkerFinishes) {
 TEST(CliRobustness, RoiExcludingTheWholeTemplateIsAnError) {
   const auto dir = test::temp_dir("rob_roi");
   std::ofstream(dir / "roi.json") << R"({"exclude_template_spheres": [{"center": [0, 0, 0], "radius": 100}]})";
-  const CliResult r = run(fit_args(dir) + " --roi " + (dir / "roi.json").string(), dir);
+  const CliResult r = run_cli(fit_args(dir) + " --roi " + (dir / "roi.json").string(), dir);
   EXPECT_EQ(r.code, 2) << r.err;
   EXPECT_NE(r.err.find("excludes every template vertex"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir / "fit.ply"));
@@ -105,7 +105,7 @@ TEST(CliRobustness, JsonNumberOutOfRangeExits2NamingTheFileInEveryJsonInput) {
       "texture --mesh " + mesh + " --image " + png + " --constraints " + bad + " --out " + (dir / "o.obj").string(),
   };
   for (const auto& c : commands) {
-    const CliResult r = run(c, dir);
+    const CliResult r = run_cli(c, dir);
     EXPECT_EQ(r.code, 2) << c << "\n" << r.err;
     EXPECT_NE(r.err.find("bad.json"), std::string::npos) << c << "\n" << r.err;
     EXPECT_NE(r.err.find("1e309"), std::string::npos) << c << "\n" << r.err;
@@ -119,7 +119,7 @@ TEST(CliRobustness, ConstraintTypeOfTheWrongKindNamesTheItem) {
   const auto dir = test::temp_dir("rob_type");
   for (const std::string type : {"null", "5", "[1]", "{}"}) {
     std::ofstream(dir / "c.json") << R"({"constraints": [{"vertex": 0, "target": [0, 0, 0], "type": )" + type + "}]}";
-    const CliResult r = run("deform --mesh " + kTemplate + " --constraints " + (dir / "c.json").string() + " --out " +
+    const CliResult r = run_cli("deform --mesh " + kTemplate + " --constraints " + (dir / "c.json").string() + " --out " +
                                 (dir / "o.ply").string(),
                             dir);
     EXPECT_EQ(r.code, 2) << type << ": " << r.err;
@@ -129,7 +129,7 @@ TEST(CliRobustness, ConstraintTypeOfTheWrongKindNamesTheItem) {
   std::ofstream(dir / "h.json") << R"({"handles": [{"vertices": [0, 1], "translate": [0, 0, 0], "rotate": {"axis": [0, 0, 1],
                                       "degrees": 5, "center": [0, 0, 0]}}], "iterations": 3, "rotation_interpolation": true,
                                       "max_step_degrees": "ten"})";
-  const CliResult r = run("tetdeform --mesh " + kTemplate + " --handles " + (dir / "h.json").string() + " --out " +
+  const CliResult r = run_cli("tetdeform --mesh " + kTemplate + " --handles " + (dir / "h.json").string() + " --out " +
                               (dir / "o.ply").string(),
                           dir);
   EXPECT_EQ(r.code, 2) << r.err;
@@ -153,7 +153,7 @@ TEST(CliRobustness, StudioNodesOfTheWrongKindNameTheLine) {
   };
   for (const auto& [text, expect] : cases) {
     std::ofstream(dir / "studio.yaml") << text;
-    const CliResult r = run("replay " + (dir / "studio.yaml").string() + " --check", dir);
+    const CliResult r = run_cli("replay " + (dir / "studio.yaml").string() + " --check", dir);
     EXPECT_EQ(r.code, 2) << text << "\n" << r.err;
     EXPECT_NE(r.err.find("studio.yaml"), std::string::npos) << r.err;
     EXPECT_NE(r.err.find(expect), std::string::npos) << text << "\n" << r.err;
@@ -170,13 +170,13 @@ TEST(CliRobustness, OneZeroAreaFaceDeformsAndFits) {
   m.V.row(f(2)) = 0.5 * (m.V.row(f(0)) + m.V.row(f(1)));  // face 700 collinear
   const std::string mesh = (dir / "degen.off").string();
   write_mesh(mesh, m);
-  CliResult r = run("validate " + mesh, dir);
+  CliResult r = run_cli("validate " + mesh, dir);
   EXPECT_NE(r.out.find("degenerate faces: 1 [700]"), std::string::npos) << r.out;
-  r = run("deform -q --rotation-field --mesh " + mesh + " --constraints " + test::sample("bend_90.json") + " --out " +
+  r = run_cli("deform -q --rotation-field --mesh " + mesh + " --constraints " + test::sample("bend_90.json") + " --out " +
               (dir / "d.ply").string(),
           dir);
   EXPECT_EQ(r.code, 0) << r.err;
-  r = run("fit --template " + mesh + " --cloud " + kScan + " --markers " + kMarkers + " --out " + (dir / "f.ply").string(), dir);
+  r = run_cli("fit --template " + mesh + " --cloud " + kScan + " --markers " + kMarkers + " --out " + (dir / "f.ply").string(), dir);
   EXPECT_EQ(r.code, 0) << r.err;
   // the same fit as on the intact template (measured 0.2 % rms both, of the diagonal)
   const std::regex rms("rms ([0-9.]+)%");
@@ -193,10 +193,10 @@ TEST(CliRobustness, MeshWithoutAreaIsRejected) {
   m.V.setZero();
   const std::string mesh = (dir / "point.off").string();
   write_mesh(mesh, m);
-  CliResult r = run("deform --mesh " + mesh + " --constraints " + test::sample("bend_90.json") + " --out " + (dir / "d.ply").string(), dir);
+  CliResult r = run_cli("deform --mesh " + mesh + " --constraints " + test::sample("bend_90.json") + " --out " + (dir / "d.ply").string(), dir);
   EXPECT_EQ(r.code, 2) << r.err;
   EXPECT_NE(r.err.find("every face has zero area"), std::string::npos) << r.err;
-  r = run("fit --template " + mesh + " --cloud " + kScan + " --markers " + kMarkers + " --out " + (dir / "f.ply").string(), dir);
+  r = run_cli("fit --template " + mesh + " --cloud " + kScan + " --markers " + kMarkers + " --out " + (dir / "f.ply").string(), dir);
   EXPECT_EQ(r.code, 2) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir / "d.ply"));
   std::filesystem::remove_all(dir);
@@ -215,7 +215,7 @@ TEST(CliRobustness, MocapInspectsAndConvertsMarkers) {
     for (int c = 0; c < 6; ++c) m.data(f, c) = 10 * f + c + 0.25;
   m.data.block<2, 3>(1, 3).setConstant(std::nan(""));  // marker b: one gap of 2 frames
   write_trc((dir / "m.trc").string(), m);
-  CliResult r = run("mocap " + (dir / "m.trc").string() + " --out " + (dir / "m.c3d").string() + " --json " + (dir / "r.json").string(), dir);
+  CliResult r = run_cli("mocap " + (dir / "m.trc").string() + " --out " + (dir / "m.c3d").string() + " --json " + (dir / "r.json").string(), dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("2 markers, 4 frames at 50 Hz"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("b: 2 frames missing in 1 gap(s), longest 2"), std::string::npos) << r.out;
@@ -236,11 +236,11 @@ TEST(CliRobustness, MocapInspectsAndConvertsMarkers) {
   EXPECT_EQ(j["per_marker"][1]["longest_gap"].get<int>(), 2);
   // bad input: exit 2 naming the file; unknown extension: exit 2
   std::ofstream(dir / "bad.c3d") << "not a c3d";
-  r = run("mocap " + (dir / "bad.c3d").string(), dir);
+  r = run_cli("mocap " + (dir / "bad.c3d").string(), dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("bad.c3d"), std::string::npos) << r.err;
   std::ofstream(dir / "x.txt") << "1 2 3";
-  EXPECT_EQ(run("mocap " + (dir / "x.txt").string(), dir).code, 2);
+  EXPECT_EQ(run_cli("mocap " + (dir / "x.txt").string(), dir).code, 2);
   std::filesystem::remove_all(dir);
 }
 
@@ -250,7 +250,7 @@ TEST(CliRobustness, MocapConvertsRealC3dToTrcAndBvhToJointPositions) {
   TBSP_REQUIRE_FILE(c3d);
   TBSP_REQUIRE_FILE(bvh);
   const auto dir = test::temp_dir("rob_mocap_real");
-  CliResult r = run("mocap " + c3d + " --out " + (dir / "v.trc").string(), dir);
+  CliResult r = run_cli("mocap " + c3d + " --out " + (dir / "v.trc").string(), dir);
   ASSERT_EQ(r.code, 0) << r.err;
   // ezc3d's test file: 51 markers, 580 frames at 100 Hz, gaps in 13 markers
   EXPECT_NE(r.out.find("51 markers, 580 frames at 100 Hz"), std::string::npos) << r.out;
@@ -266,7 +266,7 @@ TEST(CliRobustness, MocapConvertsRealC3dToTrcAndBvhToJointPositions) {
       }
     }
   EXPECT_LT(worst, 1e-3);  // TRC holds 10 significant digits; the C3D floats are in mm
-  r = run("mocap " + bvh + " --out " + (dir / "j.csv").string(), dir);
+  r = run_cli("mocap " + bvh + " --out " + (dir / "j.csv").string(), dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("43 joints"), std::string::npos) << r.out;
   // the CSV holds the forward kinematics of read_bvh, frame by frame
@@ -294,7 +294,7 @@ TEST(CliRobustness, ReplayOfACorruptRecordingExits2) {
   // every replay exits 2 naming the file, or 0 when the garbage happened to decode; never a signal
   int crashed = 0;
   for (int attempt = 0; attempt < 3; ++attempt) {
-    const CliResult r = run("replay " + (dir / "corrupt.oni").string() + " --out " + (dir / "clouds").string(), dir);
+    const CliResult r = run_cli("replay " + (dir / "corrupt.oni").string() + " --out " + (dir / "clouds").string(), dir);
     ASSERT_TRUE(r.code == 0 || r.code == 2) << r.code << ": " << r.err;
     if (r.code == 2) {
       ++crashed;

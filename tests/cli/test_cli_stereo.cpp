@@ -19,15 +19,15 @@ using namespace tbsp;
 namespace fs = std::filesystem;
 
 namespace {
-test::CliResult run(const std::string& args, const fs::path& dir) { return test::run_cli(args, dir); }
+using test::run_cli;
 }  // namespace
 
 TEST(CliStereo, StudioFramesToFusedCloudsDepthMapsRenderAndReport) {
   const auto dir = test::temp_dir("cli_stereo");
   const std::string st = (dir / "studio").string(), out = (dir / "out").string();
-  auto r = run("synth-studio -q --out " + st + " --cameras 8 --width 400 --height 400 --frames 2 --detail 0", dir);
+  auto r = run_cli("synth-studio -q --out " + st + " --cameras 8 --width 400 --height 400 --frames 2 --detail 0", dir);
   ASSERT_EQ(r.code, 0) << r.err;
-  r = run("stereo " + st + " --out " + out + " --frames 0:1 --scale 1 -q", dir);
+  r = run_cli("stereo " + st + " --out " + out + " --frames 0:1 --scale 1 -q", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   for (const char* f : {"cloud_0000.ply", "cloud_0001.ply", "cloud_0000.png", "stereo_report.json"})
     EXPECT_TRUE(fs::exists(out + "/" + f)) << f;
@@ -57,7 +57,7 @@ TEST(CliStereo, StudioFramesToFusedCloudsDepthMapsRenderAndReport) {
   EXPECT_EQ(depth_pngs, 2 * static_cast<int>(f0["pairs"].size() + rep["frames"][1]["pairs"].size()));
   // Frames outside the studio: exit 2, the previous report kept.
   const auto before = fs::last_write_time(out + "/stereo_report.json");
-  r = run("stereo " + st + " --out " + out + " --frames 5:9 -q", dir);
+  r = run_cli("stereo " + st + " --out " + out + " --frames 5:9 -q", dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("outside the studio's frames 0..1"), std::string::npos) << r.err;
   EXPECT_EQ(fs::last_write_time(out + "/stereo_report.json"), before);
@@ -68,7 +68,7 @@ TEST(CliStereo, RectifiedPairWithGroundTruthAndBadInput) {
   const std::string m = test::shared("capture/fjordyo0707__StereoMatching-CostFilter/testdata/cones/");
   TBSP_REQUIRE_FILE(m + "disp2.png");
   const std::string out = (dir / "pair").string();
-  auto r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --disparities 64 --gt " + m + "disp2.png --gt-scale 4 --out " + out, dir);
+  auto r = run_cli("stereo --left " + m + "im2.png --right " + m + "im6.png --disparities 64 --gt " + m + "disp2.png --gt-scale 4 --out " + out, dir);
   ASSERT_EQ(r.code, 0) << r.err;
   const auto rep = test::load_json(out + "/stereo_report.json");
   EXPECT_LT(rep["bad_pixels_1px_percent"].get<double>(), 12.5);  // measured 10.1 %
@@ -79,31 +79,31 @@ TEST(CliStereo, RectifiedPairWithGroundTruthAndBadInput) {
   // With a calibration: a cloud of the checked matches.
   const std::string calib = (dir / "calib.txt").string();
   std::ofstream(calib) << "cam0=[1000 0 225; 0 1000 187; 0 0 1]\ncam1=[1000 0 225; 0 1000 187; 0 0 1]\nbaseline=100\nwidth=450\nheight=375\nndisp=64\n";
-  r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --calib " + calib + " --out " + out, dir);
+  r = run_cli("stereo --left " + m + "im2.png --right " + m + "im6.png --calib " + calib + " --out " + out, dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_GT(test::load_json(out + "/stereo_report.json")["points"].get<long>(), 100000);
   // Bad input: exit 2 with a message naming the file.
-  r = run("stereo --left " + m + "im2.png --right " + (dir / "nope.png").string() + " --out " + out, dir);
+  r = run_cli("stereo --left " + m + "im2.png --right " + (dir / "nope.png").string() + " --out " + out, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("nope.png"), std::string::npos) << r.err;
   std::ofstream(calib) << "cam0=[1000 0 225; 0 1000 187; 0 0 1]\ncam1=[1000 0 225; 0 1000 187; 0 0 1]\nbaseline=100\nwidth=640\nheight=480\n";
-  r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --calib " + calib + " --out " + out, dir);
+  r = run_cli("stereo --left " + m + "im2.png --right " + m + "im6.png --calib " + calib + " --out " + out, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("640x480"), std::string::npos) << r.err;
-  r = run("stereo --left " + m + "im2.png --right " + m + "im6.png --disparities 50 --out " + out, dir);
+  r = run_cli("stereo --left " + m + "im2.png --right " + m + "im6.png --disparities 50 --out " + out, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("multiple of 16"), std::string::npos) << r.err;
-  r = run("stereo --out " + out, dir);
+  r = run_cli("stereo --out " + out, dir);
   EXPECT_EQ(r.code, 2);
 }
 
 TEST(CliStereo, RefineStereoKeepsAGoodMeshAndNamesMissingMeshes) {
   const auto dir = test::temp_dir("cli_refine_stereo");
   const std::string st = (dir / "studio").string(), out = (dir / "out").string();
-  auto r = run("synth-studio -q --out " + st + " --cameras 8 --width 500 --height 500 --frames 1 --detail 1", dir);
+  auto r = run_cli("synth-studio -q --out " + st + " --cameras 8 --width 500 --height 500 --frames 1 --detail 1", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   // The ground-truth mesh is already right: refinement moves it little (mean < 0.3 % of ~1.9 m).
-  r = run("refine-stereo " + st + " --meshes " + st + "/gt --out " + out + " -q", dir);
+  r = run_cli("refine-stereo " + st + " --meshes " + st + "/gt --out " + out + " -q", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::exists(out + "/refined_0000.ply"));
   const auto rep = test::load_json(out + "/refine_report.json");
@@ -111,7 +111,7 @@ TEST(CliStereo, RefineStereoKeepsAGoodMeshAndNamesMissingMeshes) {
   EXPECT_GT(rep["frames"][0]["points"].get<long>(), 1000);
   EXPECT_LT(rep["frames"][0]["mean_vertex_move"].get<double>(), 0.006);
   // A missing mesh is named before anything runs.
-  r = run("refine-stereo " + st + " --meshes " + (dir / "none_%04d.ply").string() + " --out " + out + " -q", dir);
+  r = run_cli("refine-stereo " + st + " --meshes " + (dir / "none_%04d.ply").string() + " --out " + out + " -q", dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("none_0000.ply"), std::string::npos) << r.err;
 }
@@ -119,9 +119,9 @@ TEST(CliStereo, RefineStereoKeepsAGoodMeshAndNamesMissingMeshes) {
 TEST(CliStereo, RefineSilhouetteKeepsAMatchingMeshAndRefusesBadOptions) {
   const auto dir = test::temp_dir("cli_refine_sil");
   const std::string st = (dir / "studio").string(), out = (dir / "out").string();
-  auto r = run("synth-studio -q --out " + st + " --cameras 6 --width 400 --height 400 --frames 2 --detail 0", dir);
+  auto r = run_cli("synth-studio -q --out " + st + " --cameras 6 --width 400 --height 400 --frames 2 --detail 0", dir);
   ASSERT_EQ(r.code, 0) << r.err;
-  r = run("refine-silhouette " + st + " --meshes " + st + "/gt/%04d.ply --frames 1 --out " + out + " -q", dir);
+  r = run_cli("refine-silhouette " + st + " --meshes " + st + "/gt/%04d.ply --frames 1 --out " + out + " -q", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::exists(out + "/refined_0001.ply"));
   const auto rep = test::load_json(out + "/silhouette_report.json");
@@ -129,7 +129,7 @@ TEST(CliStereo, RefineSilhouetteKeepsAMatchingMeshAndRefusesBadOptions) {
   EXPECT_EQ(rep["frames"][0]["views"].size(), 6u);
   // The ground truth already matches: the mismatch does not grow.
   EXPECT_LE(rep["frames"][0]["xor_after"].get<long>(), rep["frames"][0]["xor_before"].get<long>());
-  r = run("refine-silhouette " + st + " --meshes " + st + "/gt/%04d.ply --weight 0 --out " + out + " -q", dir);
+  r = run_cli("refine-silhouette " + st + " --meshes " + st + "/gt/%04d.ply --weight 0 --out " + out + " -q", dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("weight"), std::string::npos) << r.err;
 }
@@ -139,7 +139,7 @@ TEST(CliStereo, RefineSilhouetteKeepsAMatchingMeshAndRefusesBadOptions) {
 TEST(CliStereo, RefineSilhouettePosesTheTemplateFromImageMarkers) {
   const auto dir = test::temp_dir("cli_refine_sil_pose");
   const std::string st = (dir / "studio").string(), out = (dir / "out").string();
-  auto r = run("synth-studio -q --out " + st + " --cameras 6 --width 400 --height 400 --frames 1 --detail 0", dir);
+  auto r = run_cli("synth-studio -q --out " + st + " --cameras 6 --width 400 --height 400 --frames 1 --detail 0", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   const Studio studio = read_studio(st + "/studio.yaml");
   const TriMesh tmpl = read_mesh(studio.resolve(studio.template_mesh)), gt = read_mesh(studio.groundTruthPath(0));
@@ -155,7 +155,7 @@ TEST(CliStereo, RefineSilhouettePosesTheTemplateFromImageMarkers) {
   }
   const std::string pose = (dir / "pose.json").string();
   std::ofstream(pose) << nlohmann::json({{"markers", markers}}).dump(1);
-  r = run("refine-silhouette " + st + " --pose " + pose + " --tets 2000 --overlays --out " + out + " -q", dir);
+  r = run_cli("refine-silhouette " + st + " --pose " + pose + " --tets 2000 --overlays --out " + out + " -q", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   for (const char* f : {"posed_0000.ply", "refined_0000.ply", "overlay_0000_before.png", "overlay_0000_after.png"})
     EXPECT_TRUE(fs::exists(out + "/" + f)) << f;
@@ -168,11 +168,11 @@ TEST(CliStereo, RefineSilhouettePosesTheTemplateFromImageMarkers) {
   EXPECT_GE(iou, 0.9);
 
   // Bad input: --pose with --meshes, several frames, a marker in one view (named with the file).
-  r = run("refine-silhouette " + st + " --pose " + pose + " --meshes " + st + "/gt --out " + out + " -q", dir);
+  r = run_cli("refine-silhouette " + st + " --pose " + pose + " --meshes " + st + "/gt --out " + out + " -q", dir);
   EXPECT_NE(r.code, 0);
   markers[3]["pixels"] = {{studio.cameras[0].camera.name(), {10, 10}}};
   std::ofstream(pose) << nlohmann::json({{"markers", markers}}).dump(1);
-  r = run("refine-silhouette " + st + " --pose " + pose + " --out " + out + " -q", dir);
+  r = run_cli("refine-silhouette " + st + " --pose " + pose + " --out " + out + " -q", dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("pose.json"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("markers[3].pixels"), std::string::npos) << r.err;

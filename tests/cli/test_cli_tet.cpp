@@ -18,7 +18,7 @@ using namespace tbsp;
 
 namespace {
 using test::CliResult;
-CliResult run(const std::string& args, const std::filesystem::path& dir) { return test::run_cli(args, dir); }
+using test::run_cli;
 std::string write(const std::filesystem::path& p, const std::string& text) {
   std::ofstream(p) << text;
   return p.string();
@@ -37,7 +37,7 @@ TEST(CliTet, BendsABarAndTransfersToTheInput) {
   write_mesh(bar, make_box(40, 8, 8, 1.0, 0.2, 0.2));
   const std::string h = write(dir / "h.json", kBend);
   const std::string out = (dir / "bent.ply").string(), rep = (dir / "r.json").string(), tets = (dir / "t.mesh").string();
-  const CliResult r = run("tetdeform -q --mesh " + bar + " --handles " + h + " --out " + out + " --tets 3000 --report " + rep +
+  const CliResult r = run_cli("tetdeform -q --mesh " + bar + " --handles " + h + " --out " + out + " --tets 3000 --report " + rep +
                               " --save-tets " + tets,
                           dir);
   ASSERT_EQ(r.code, 0) << r.err;
@@ -62,7 +62,7 @@ TEST(CliTet, BendsABarAndTransfersToTheInput) {
   // a (rest) tet mesh in, a tet mesh out
   const std::string rest = (dir / "rest.mesh").string(), out2 = (dir / "bent2.mesh").string();
   write_tet_mesh(rest, tetrahedralize(make_box(20, 4, 4, 1.0, 0.2, 0.2)));
-  const CliResult r2 = run("tetdeform -q --mesh " + rest + " --handles " + h + " --out " + out2, dir);
+  const CliResult r2 = run_cli("tetdeform -q --mesh " + rest + " --handles " + h + " --out " + out2, dir);
   ASSERT_EQ(r2.code, 0) << r2.err;
   EXPECT_EQ(read_tet_mesh(out2).V.rows(), read_tet_mesh(rest).V.rows());
   std::filesystem::remove_all(dir);
@@ -75,7 +75,7 @@ TEST(CliTet, BadInputGivesClearErrorsAndKeepsOutputs) {
   const std::string out = (dir / "keep.ply").string();
   write(out, "precious");
   auto expect = [&](const std::string& args, int code, const std::vector<std::string>& needles) {
-    const CliResult r = run("tetdeform -q " + args + " --out " + out, dir);
+    const CliResult r = run_cli("tetdeform -q " + args + " --out " + out, dir);
     EXPECT_EQ(r.code, code) << args << "\n" << r.err;
     for (const auto& n : needles) EXPECT_NE(r.err.find(n), std::string::npos) << "missing '" << n << "' in: " << r.err;
     std::ifstream in(out);
