@@ -26,15 +26,15 @@ using namespace tbsp;
 namespace {
 const char* kBunny = "meshes/libigl__libigl-tutorial-data/bunny.off";
 
-struct Outcome {
+struct GtOutcome {
   FitReport report;
   synth::ScenarioErrors err;
   double clean_p99 = 0, hole_surface_mean = 0;
   int flipped_vs_truth = 0;
 };
 
-Outcome run(const synth::Scenario& s, const FitParameters& p = {}) {
-  Outcome o;
+GtOutcome run(const synth::Scenario& s, const FitParameters& p = {}) {
+  GtOutcome o;
   TriMesh fit;
   std::vector<VertexStatus> st;
   o.report = fit_template(s.templ, s.P, s.N, s.markers, {}, p, fit, st);
@@ -112,7 +112,7 @@ TEST(TemplateFittingGroundTruth, BendTwistScaleNoiseOutliersHole) {
   const synth::Scenario s = bunny_30_markers();
   ASSERT_GE(s.hole_area_fraction, 0.25);
   ASSERT_LE(s.markers.size(), 30u);
-  const Outcome o = run(s, weight_one());
+  const GtOutcome o = run(s, weight_one());
   EXPECT_NEAR(o.report.scale, 2.0, 0.1);                 // §5.2 recovers the ×2
   EXPECT_LE(o.err.hole_mean_rel, 0.0100);                // issue target; measured 0.895 %
   EXPECT_LE(o.hole_surface_mean, 0.0100);                // measured 0.35 %: semantic hole filling
@@ -131,8 +131,8 @@ TEST(TemplateFittingGroundTruth, DetailRoundsSharpenProtrusionsAndKeepTheHole) {
   const FitParameters base = weight_one();
   FitParameters detail = base;
   detail.detail_rounds = 4;
-  const Outcome a = run(s, base);
-  const Outcome b = run(s, detail);
+  const GtOutcome a = run(s, base);
+  const GtOutcome b = run(s, detail);
   EXPECT_GT(b.report.detail_iterations_run, 0);
   EXPECT_GT(b.report.detail_points_tracked, 0);
   EXPECT_EQ(b.report.detail_surface_constraints, 0);  // off by default
@@ -154,7 +154,7 @@ TEST(TemplateFittingGroundTruth, DetailRoundsOnOtherSeeds) {
   FitParameters p = weight_one();
   p.detail_rounds = 4;
   for (unsigned seed : {2u, 4u}) {
-    const Outcome o = run(bunny_30_markers(seed), p);
+    const GtOutcome o = run(bunny_30_markers(seed), p);
     EXPECT_NEAR(o.report.scale, 2.0, 0.1) << "seed " << seed;
     EXPECT_LE(o.err.hausdorff_clean_rel, 0.0035) << "seed " << seed;  // measured 0.265 / 0.326 % (defaults 0.92 / 0.75 %)
     EXPECT_LE(o.clean_p99, 0.0016) << "seed " << seed;                // measured 0.12-0.13 %
@@ -176,7 +176,7 @@ TEST(TemplateFittingGroundTruth, ResidualMatchingIsUnbiasedAndLessNoisy) {
   FitParameters kernel = residual;
   kernel.detail_residual_matching = false;
   kernel.detail_surface_weight = 4;
-  auto normal_error = [&](const FitParameters& p, double& mean, double& rms, int& n, Outcome& o) {
+  auto normal_error = [&](const FitParameters& p, double& mean, double& rms, int& n, GtOutcome& o) {
     TriMesh fit;
     std::vector<VertexStatus> st;
     o.report = fit_template(s.templ, s.P, s.N, s.markers, {}, p, fit, st);
@@ -196,7 +196,7 @@ TEST(TemplateFittingGroundTruth, ResidualMatchingIsUnbiasedAndLessNoisy) {
   };
   double mr, rr, mk, rk;
   int nr, nk;
-  Outcome o_r, o_k;
+  GtOutcome o_r, o_k;
   normal_error(residual, mr, rr, nr, o_r);
   normal_error(kernel, mk, rk, nk, o_k);
   // standard errors of the means (the errors of neighbouring vertices are correlated, so these
@@ -224,8 +224,8 @@ TEST(TemplateFittingGroundTruth, SparseSupportWeightingImprovesTheHoleFilling) {
   off.support_points = 0;
   for (unsigned seed : {1u, 4u}) {
     const synth::Scenario s = bunny_30_markers(seed);
-    const Outcome a = run(s, off);
-    const Outcome b = run(s, weight_one());  // default: 3
+    const GtOutcome a = run(s, off);
+    const GtOutcome b = run(s, weight_one());  // default: 3
     // measured 0.977 -> 0.895 % (seed 1), 1.064 -> 0.917 % (seed 4)
     EXPECT_LE(b.err.hole_mean_rel, a.err.hole_mean_rel - 0.0005) << "seed " << seed;
     EXPECT_LE(b.err.hausdorff_clean_rel, a.err.hausdorff_clean_rel + 0.0005) << "seed " << seed;  // 0.864 / 0.731 -> 0.864 / 0.752 %
@@ -235,7 +235,7 @@ TEST(TemplateFittingGroundTruth, SparseSupportWeightingImprovesTheHoleFilling) {
 TEST(TemplateFittingGroundTruth, TwentyMarkersThesisWeights) {
   TBSP_REQUIRE_FILE(test::shared(kBunny));
   const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), {});
-  const Outcome o = run(s);
+  const GtOutcome o = run(s);
   EXPECT_NEAR(o.report.scale, 2.0, 0.1);
   EXPECT_LE(o.err.hausdorff_clean_rel, 0.0100);          // measured 0.845 %
   EXPECT_LE(o.hole_surface_mean, 0.0100);                // measured 0.50 %
@@ -249,7 +249,7 @@ TEST(TemplateFittingGroundTruth, WithoutGlobalScaleTheFitFails) {
   const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), {});
   FitParameters no_scale;
   no_scale.estimate_scale = false;
-  const Outcome o = run(s, no_scale);
+  const GtOutcome o = run(s, no_scale);
   EXPECT_GT(o.err.hausdorff_clean_rel, 0.03);  // measured 7.1 % (0.83 % with the scale)
 }
 
@@ -259,7 +259,7 @@ TEST(TemplateFittingGroundTruth, BadlyRegisteredFragmentsGiveOneSurface) {
   opt.fragment_offset = 0.01;  // one half of the cloud shifted by 1 % of the bbox diagonal
   opt.hole = 0.05;
   const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
-  const Outcome o = run(s);
+  const GtOutcome o = run(s);
   // a single sheet between the fragments: no fold-overs, every clean sample within ~offset
   EXPECT_EQ(o.flipped_vs_truth, 0);
   EXPECT_LE(o.err.hausdorff_clean_rel, 0.02);
@@ -327,7 +327,7 @@ TEST(TemplateFittingGroundTruth, WithoutMarkersARoughlyPlacedTemplateIsAlignedAn
   for (unsigned seed : {1u, 2u}) {
     synth::Scenario s = bunny_roughly_placed(seed);
     s.markers.clear();
-    const Outcome o = run(s, weight_one());
+    const GtOutcome o = run(s, weight_one());
     std::printf("  seed %u alignment: %.2f deg, scale %.4f, %d iterations, rms %.3g, first pass %.3f s; fit: scale %.4f, clean %.3f%%, "
                 "p99 %.3f%%, hole %.3f%%, coarse nodes %d (hypotheses %d), %.2f s\n",
                 seed, o.report.alignment_rotation_deg, o.report.alignment_scale, o.report.alignment_iterations, o.report.alignment_rms,
@@ -386,9 +386,9 @@ TEST(TemplateFittingGroundTruth, WithoutMarkersTheCoarseStageFollowsATurnedHead)
     opt.translation = Eigen::Vector3d(0.03, -0.02, 0.01);
     synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), opt);
     synth::turn_scenario(s, 8);
-    const Outcome with = run(s, p);
+    const GtOutcome with = run(s, p);
     s.markers.clear();
-    const Outcome without = run(s, p);
+    const GtOutcome without = run(s, p);
     std::printf("  %g deg: with markers %.3f%%, without %.3f%% (tail means", deg, 100 * with.err.hausdorff_clean_rel,
                 100 * without.err.hausdorff_clean_rel);
     for (double t : without.report.coarse_scores) std::printf(" %.4g", t);
@@ -499,7 +499,7 @@ TEST(TemplateFittingGroundTruth, CoarseStageFollowsTurnedHeadAndEars) {
   p.detail_rounds = 4;
   for (double deg : {30.0, 45.0}) {
     const synth::Scenario s = synth::make_scenario(read_mesh(test::shared(kBunny)), articulated_bunny(deg, 1.1));
-    const Outcome o = run(s, p);
+    const GtOutcome o = run(s, p);
     EXPECT_EQ(o.report.coarse_nodes, 400);
     EXPECT_GT(o.report.coarse_steps, 0);
     EXPECT_LE(o.err.hausdorff_clean_rel, deg < 40 ? 0.0065 : 0.0075) << deg;

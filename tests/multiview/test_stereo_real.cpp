@@ -28,12 +28,12 @@
 using namespace tbsp;
 
 namespace {
-struct Scene {
+struct StereoScene {
   const char *name, *left, *right, *gt;
   double scale;
   int disparities;
 };
-const Scene kScenes[] = {{"tsukuba", "im3.png", "im4.png", "disp3.pgm", 16, 16},
+const StereoScene kScenes[] = {{"tsukuba", "im3.png", "im4.png", "disp3.pgm", 16, 16},
                          {"venus", "im2.png", "im6.png", "disp2.pgm", 8, 32},
                          {"teddy", "im2.png", "im6.png", "disp2.png", 4, 64},
                          {"cones", "im2.png", "im6.png", "disp2.png", 4, 64}};
@@ -82,7 +82,7 @@ cv::Mat pcl_adaptive_cost(const cv::Mat& L, const cv::Mat& R, int nd) {
 
 TEST(StereoMiddlebury, OursBeatsRawSgbmAndPclOnEveryScene) {
   std::printf("  %-8s %10s %10s %10s   (bad pixels > 1 px, %% of pixels with ground truth)\n", "scene", "tbsp", "raw SGBM", "PCL ACSO");
-  for (const Scene& s : kScenes) {
+  for (const StereoScene& s : kScenes) {
     const std::string dir = test::shared(std::string(kMiddlebury) + s.name + "/");
     TBSP_REQUIRE_FILE(dir + s.gt);
     const cv::Mat L = cv::imread(dir + s.left), R = cv::imread(dir + s.right), G = cv::imread(dir + s.gt, cv::IMREAD_GRAYSCALE);
