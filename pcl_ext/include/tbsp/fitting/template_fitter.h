@@ -302,7 +302,8 @@ struct FitReport {
   /// with FitParameters::pleat_collapse: faces against the (consistent) cloud normal near them
   /// before / after, and the edges collapsed
   int pleat_faces_before = 0, pleat_faces_after = 0, pleat_collapses = 0;
-  // timings (s)
+  // timings (s); t_normals and t_search: the cloud's preparation, done once per fit_template
+  // call (a fit without markers shares it between its passes and hypotheses)
   double t_normals = 0, t_search = 0, t_alignment = 0, t_initial = 0, t_coarse = 0, t_scale = 0, t_iterations = 0, t_matching = 0,
          t_solve = 0, t_propagation = 0, t_detail = 0, t_remeshing = 0, t_fairing = 0, t_metrics = 0, t_total = 0;
   int detail_iterations_run = 0;         ///< matching / solve steps of the detail rounds, all rounds
