@@ -62,7 +62,7 @@ const Eigen::MatrixX3d& FitState::consistentNormals() {
 
 PreparedCloud prepare_cloud(const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                             int normal_neighbours) {
-  const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
+  const std::string who = kWho;
   PreparedCloud c;
   // ---- finite points, ROI
   c.points_total = P_in.rows();
@@ -158,7 +158,7 @@ void prepare_markers(FitState& s, const Eigen::MatrixX3d& P_in, const RegionOfIn
       t = m.position;
       // a free marker far outside the data poses the template away from it (and blows up the
       // global scale): legal, but almost always a unit or typing mistake
-      const double out = (t - t.cwiseMax(s.cloud_lo).cwiseMin(s.cloud_hi)).norm();
+      const double out = (t - t.cwiseMax(s.cloud.lo).cwiseMin(s.cloud.hi)).norm();
       if (out > s.rep.bbox_diagonal) {
         const std::string msg = "marker " + std::to_string(k) + "'s free position lies " +
                                 std::to_string(out / s.rep.bbox_diagonal) +

@@ -33,6 +33,9 @@
 namespace tbsp {
 namespace fit_impl {
 
+/// Prefix of the fit's error messages.
+inline constexpr const char* kWho = "[tbsp::TemplateFitting::reconstruct] ";
+
 /// The input cloud as the stages use it (prepare_cloud): finite points, ROI, search tree, spacing
 /// and normals (given, or PCA). It depends only on the cloud, the ROI and normal_neighbours, so
 /// the passes and hypotheses of one fit without markers share one (fit_template).
@@ -53,14 +56,14 @@ struct FitState {
   FitState(const TriMesh& t, const std::vector<FitMarker>& m, const ProgressCallback& p, FitReport& r,
            std::vector<VertexStatus>& st, const PreparedCloud& c)
       : markers(m), progress(p), rep(r), status(st), u(r.used), cloud(c), np(c.np), P(c.P), N(c.N), roi_ok(c.roi_ok),
-        cloud_lo(c.lo), cloud_hi(c.hi), diag(c.diag), search(c.search), templ_(&t) {}
+        diag(c.diag), search(c.search), templ_(&t) {}
 
   const std::vector<FitMarker>& markers;
   const ProgressCallback& progress;
   FitReport& rep;
   std::vector<VertexStatus>& status;
   FitParameters& u;  ///< the parameters used (rep.used: automatic values filled in)
-  const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
+  const std::string who = kWho;
 
   // the cloud (finite points only: P, N have np rows), roi_ok per point; shared, read-only,
   // except N: this fit's copy, oriented by its posed template (orient_cloud_normals)
@@ -69,7 +72,6 @@ struct FitState {
   const Eigen::MatrixX3d& P;
   Eigen::MatrixX3d N;
   const std::vector<char>& roi_ok;
-  const Eigen::Vector3d cloud_lo, cloud_hi;
   const double diag;  ///< bounding-box diagonal of the ROI points
   const PointSearch& search;
   bool orient = false;  ///< orient N by the posed template (estimated or unreliable normals)

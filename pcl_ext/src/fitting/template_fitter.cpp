@@ -148,7 +148,7 @@ FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eig
   const auto t_all = Clock::now();
   // one BLAS thread: no contention with our OpenMP loops (blas_threads.h)
   const ScopedBlasThreads blas_threads(1);
-  const std::string who = "[tbsp::TemplateFitting::reconstruct] ";
+  const std::string who = fit_impl::kWho;
   std::string why;
   if (!params.isValid(&why)) throw InvalidInput(who + "invalid parameters: " + why);
   MeshRequirements req;
