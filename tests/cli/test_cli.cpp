@@ -236,3 +236,29 @@ TEST(Cli, RenderDrawsPointCloudsWithAColourBar) {
   EXPECT_NE(r.err.find("2 values for the 642 points"), std::string::npos) << r.err;
   std::filesystem::remove_all(dir);
 }
+
+// `tbsp` is a launcher that executes tbsp-cli (plugins/cli/launcher.cpp): arguments, output and
+// exit codes pass through, and a launcher without its CLI says what it looked for.
+TEST(Cli, LauncherPassesThroughAndNamesAMissingCli) {
+  const auto dir = test::temp_dir("cli_launcher");
+  CliResult r = run_cli("--version", dir);
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("tbsp 0.1.0"), std::string::npos) << r.out;
+  r = run_cli("no-such-command", dir);
+  EXPECT_NE(r.code, 0);
+  EXPECT_EQ(r.err.find("tbsp-cli"), std::string::npos) << "the CLI, not the launcher, answers: " << r.err;
+  // the launcher alone, without tbsp-cli beside it or in ../libexec
+  const auto alone = dir / "bin" / "tbsp";
+  std::filesystem::create_directories(alone.parent_path());
+  std::filesystem::copy_file(TBSP_CLI, alone);
+  const std::string outf = (dir / "out.txt").string(), errf = (dir / "err.txt").string();
+  const int rc = std::system((alone.string() + " --version >" + outf + " 2>" + errf).c_str());
+  ASSERT_TRUE(WIFEXITED(rc));
+  EXPECT_EQ(WEXITSTATUS(rc), 127);
+  std::stringstream err;
+  err << std::ifstream(errf).rdbuf();
+  EXPECT_NE(err.str().find("tbsp-cli"), std::string::npos) << err.str();
+  EXPECT_NE(err.str().find((dir / "bin").string()), std::string::npos) << err.str();
+  EXPECT_NE(err.str().find("Fix:"), std::string::npos) << err.str();
+  std::filesystem::remove_all(dir);
+}
