@@ -15,10 +15,10 @@ struct CliResult {
   std::string out, err;
 };
 
-/// Runs `tbsp ARGS`; stdout and stderr are captured through files in `dir`.
-inline CliResult run_cli(const std::string& args, const std::filesystem::path& dir) {
+/// Runs `tbsp ARGS` (or the program `exe`); stdout and stderr are captured through files in `dir`.
+inline CliResult run_cli(const std::string& args, const std::filesystem::path& dir, const std::string& exe = TBSP_CLI) {
   const std::string outf = (dir / "stdout.txt").string(), errf = (dir / "stderr.txt").string();
-  const int rc = std::system((std::string(TBSP_CLI) + " " + args + " >" + outf + " 2>" + errf).c_str());
+  const int rc = std::system((exe + " " + args + " >" + outf + " 2>" + errf).c_str());
   auto slurp = [](const std::string& f) {
     std::ifstream in(f);
     std::stringstream ss;

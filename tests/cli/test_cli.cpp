@@ -251,14 +251,10 @@ TEST(Cli, LauncherPassesThroughAndNamesAMissingCli) {
   const auto alone = dir / "bin" / "tbsp";
   std::filesystem::create_directories(alone.parent_path());
   std::filesystem::copy_file(TBSP_CLI, alone);
-  const std::string outf = (dir / "out.txt").string(), errf = (dir / "err.txt").string();
-  const int rc = std::system((alone.string() + " --version >" + outf + " 2>" + errf).c_str());
-  ASSERT_TRUE(WIFEXITED(rc));
-  EXPECT_EQ(WEXITSTATUS(rc), 127);
-  std::stringstream err;
-  err << std::ifstream(errf).rdbuf();
-  EXPECT_NE(err.str().find("tbsp-cli"), std::string::npos) << err.str();
-  EXPECT_NE(err.str().find((dir / "bin").string()), std::string::npos) << err.str();
-  EXPECT_NE(err.str().find("Fix:"), std::string::npos) << err.str();
+  r = run_cli("--version", dir, alone.string());
+  EXPECT_EQ(r.code, 127);
+  EXPECT_NE(r.err.find("tbsp-cli"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find((dir / "bin").string()), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("Fix:"), std::string::npos) << r.err;
   std::filesystem::remove_all(dir);
 }
