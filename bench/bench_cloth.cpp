@@ -1,7 +1,8 @@
 // bench_cloth: PbdClothSimulator throughput on a ~5k-vertex skirt (issue 26 goal: ≥ 500 frames/s
 // with n_iter = 16 on 2 cores). The skirt is an open flared tube hanging from a waist ring that
 // turns and sways (kinematic, δ = 0), two leg capsules swing inside it (proxies). Prints a table:
-// frames/s for each configuration and thread count, the largest edge strain and contacts.
+// frames/s for each configuration and thread count, the largest edge strain, contacts and a hash
+// of the final state (equal hashes: the same simulation, bit for bit).
 //
 //   bench_cloth [--frames N] [--rings R] [--segments S] [--only WORD] [--threads N]
 //   (--only: the configurations whose name contains WORD; --threads: that thread count only)
@@ -10,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdint>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -74,7 +76,15 @@ struct Row {
   double fps;
   double strain, strain99;
   int contacts;
+  std::uint32_t state;  // FNV-1a of the final positions' bits: equal rows ran the same simulation
 };
+
+std::uint32_t fnv1a(const Eigen::MatrixX3d& X) {
+  std::uint32_t h = 2166136261u;
+  const auto* bytes = reinterpret_cast<const unsigned char*>(X.data());
+  for (std::size_t i = 0; i < std::size_t(X.size()) * sizeof(double); ++i) h = (h ^ bytes[i]) * 16777619u;
+  return h;
+}
 
 Row run(const Skirt& s, const PbdSettings& st, int frames, int threads) {
   omp_set_num_threads(threads);
@@ -99,7 +109,7 @@ Row run(const Skirt& s, const PbdSettings& st, int frames, int threads) {
   }
   const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   // the strain statistics are O(#edges) per frame, inside the timing (a few % of a frame)
-  return {frames / sec, strain, strain99, contacts};
+  return {frames / sec, strain, strain99, contacts, fnv1a(sim.positions())};
 }
 
 }  // namespace
@@ -125,7 +135,8 @@ int main(int argc, char** argv) {
   const Skirt s = make_skirt(rings, segments);
   std::printf("skirt: %lld vertices, %lld faces; %d frames at 40 fps; n_iter = 16 sweeps per frame\n",
               (long long)s.V.rows(), (long long)s.F.rows(), frames);
-  std::printf("%-44s %7s %10s %10s %10s %9s\n", "configuration", "threads", "frames/s", "max strain", "p99 strain", "contacts");
+  std::printf("%-44s %7s %10s %10s %10s %9s %9s\n", "configuration", "threads", "frames/s", "max strain", "p99 strain", "contacts",
+              "state");
   struct Config {
     const char* name;
     int iterations, substeps;
@@ -144,7 +155,7 @@ int main(int argc, char** argv) {
     for (int threads : {1, 2}) {
       if (only_threads > 0 && threads != only_threads) continue;
       const Row r = run(s, st, frames, threads);
-      std::printf("%-44s %7d %10.1f %10.3f %10.3f %9d\n", c.name, threads, r.fps, r.strain, r.strain99, r.contacts);
+      std::printf("%-44s %7d %10.1f %10.3f %10.3f %9d  %08x\n", c.name, threads, r.fps, r.strain, r.strain99, r.contacts, r.state);
     }
   }
   return 0;

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "tbsp/cloth/pbd_cloth_simulator.h"
+#include "pbd_bend_kernel.h"
 
 namespace tbsp {
 
@@ -12,14 +13,6 @@ namespace {
 // Per-iteration stiffness so that n iterations of k' give the effect of one projection of k
 // (Müller et al. 2007, §3.3): 1 − (1 − k)^(1/n).
 double per_iteration(double k, int n) { return k >= 1 ? 1.0 : 1.0 - std::pow(1.0 - k, 1.0 / n); }
-
-// acos to within 7e-5 rad (Abramowitz & Stegun 4.4.45; relative error 5e-5 for the small
-// angles of nearly flat cloth): libm's acos was a fifth of the simulation time.
-inline double fast_acos(double x) {
-  const double a = std::abs(x);
-  const double r = std::sqrt(1.0 - a) * (1.5707288 + a * (-0.2121144 + a * (0.0742610 - 0.0187293 * a)));
-  return x >= 0 ? r : M_PI - r;
-}
 
 // Largest bending stiffness of one sweep: the linearised dihedral projection overshoots and
 // can diverge at full stiffness (k_bend = 1 would give 1 per sweep).
@@ -258,43 +251,41 @@ void PbdClothSimulator::projectStretch(double k) {
 }
 
 void PbdClothSimulator::projectBend(const std::vector<double>& kr) {
-  auto one = [&](int index) {
-      const Bend& c = bend_[std::size_t(index)];
-      const double k = kr[std::size_t(c.region)];
-      if (k == 0) return;
-      // Bender's PBD dihedral constraint (gradients of Bridson et al. 2003): p2-p3 the edge,
-      // p0 and p1 the wings; φ = acos(n1·n2), C = φ − φ_rest (eq. 10.3)
-      const std::size_t i0 = std::size_t(c.c), i1 = std::size_t(c.d), i2 = std::size_t(c.a), i3 = std::size_t(c.b);
-      const double w0 = inv_mass_[i0], w1 = inv_mass_[i1], w2 = inv_mass_[i2], w3 = inv_mass_[i3];
-      if (w0 + w1 + w2 + w3 == 0) return;
-      const Eigen::Vector3d &p0 = pred_[i0], &p1 = pred_[i1], &p2 = pred_[i2], &p3 = pred_[i3];
-      const Eigen::Vector3d e = p3 - p2;
-      const double elen = e.norm();
-      if (elen < 1e-12) return;
-      Eigen::Vector3d n1 = (p2 - p0).cross(p3 - p0), n2 = (p3 - p1).cross(p2 - p1);
-      const double n1s = n1.squaredNorm(), n2s = n2.squaredNorm();
-      if (n1s < 1e-30 || n2s < 1e-30) return;
-      n1 /= n1s;
-      n2 /= n2s;
-      const Eigen::Vector3d d0 = elen * n1, d1 = elen * n2;
-      const Eigen::Vector3d d2 = ((p0 - p3).dot(e) / elen) * n1 + ((p1 - p3).dot(e) / elen) * n2;
-      const Eigen::Vector3d d3 = ((p2 - p0).dot(e) / elen) * n1 + ((p2 - p1).dot(e) / elen) * n2;
-      // cos φ = N1·N2 / (|N1||N2|); here n = N/|N|², so |n1||n2| = 1/(|N1||N2|)
-      const double cosphi = n1.dot(n2) / std::sqrt(n1.squaredNorm() * n2.squaredNorm());
-      const double phi = fast_acos(std::clamp(cosphi, -1.0, 1.0));
-      double lambda = w0 * d0.squaredNorm() + w1 * d1.squaredNorm() + w2 * d2.squaredNorm() + w3 * d3.squaredNorm();
-      // the free vertices cannot change the angle (e.g. only an edge vertex is free and the other
-      // three are collinear): the linearised step would be unbounded
-      const double wmax = std::max({w0, w1, w2, w3});
-      if (lambda <= 1e-6 * wmax * (d0.squaredNorm() + d1.squaredNorm() + d2.squaredNorm() + d3.squaredNorm())) return;
-      lambda = (phi - c.rest) / lambda * k;
-      if (n1.cross(n2).dot(e) > 0) lambda = -lambda;
-      pred_[i0] -= w0 * lambda * d0;
-      pred_[i1] -= w1 * lambda * d1;
-      pred_[i2] -= w2 * lambda * d2;
-      pred_[i3] -= w3 * lambda * d3;
+  // four constraints of a colour per call of the vector kernel (pbd_bend_kernel.cpp); the
+  // conflict colour one at a time, in order
+  static_assert(sizeof(Eigen::Vector3d) == 3 * sizeof(double), "pred_ is read as packed xyz");
+  double* P = pred_.data()->data();
+  auto set_lane = [&](detail::BendQuad& q, int l, int index) {
+    const Bend& c = bend_[std::size_t(index)];
+    q.i0[l] = c.c, q.i1[l] = c.d, q.i2[l] = c.a, q.i3[l] = c.b;
+    q.rest[l] = c.rest;
+    q.k[l] = kr[std::size_t(c.region)];
   };
-  sweep_colours(bend_colours_, bend_conflict_colour_, one);
+  auto idle = [](detail::BendQuad& q, int from) {
+    for (int l = from; l < 4; ++l) q.i0[l] = q.i1[l] = q.i2[l] = q.i3[l] = 0, q.rest[l] = 0, q.k[l] = 0;
+  };
+  for (std::size_t ci = 0; ci < bend_colours_.size(); ++ci) {
+    const auto& colour = bend_colours_[ci];
+    if (ci == bend_conflict_colour_) {
+#pragma omp single
+      for (int index : colour) {
+        detail::BendQuad q;
+        set_lane(q, 0, index);
+        idle(q, 1);
+        detail::project_bend_quad(q, inv_mass_.data(), P);
+      }
+    } else {
+      const std::size_t quads = (colour.size() + 3) / 4;
+#pragma omp for schedule(static)
+      for (std::size_t g = 0; g < quads; ++g) {
+        detail::BendQuad q;
+        const int lanes = int(std::min<std::size_t>(4, colour.size() - 4 * g));
+        for (int l = 0; l < lanes; ++l) set_lane(q, l, colour[4 * g + std::size_t(l)]);
+        idle(q, lanes);
+        detail::project_bend_quad(q, inv_mass_.data(), P);
+      }
+    }
+  }
 }
 
 void PbdClothSimulator::projectTethers() {
