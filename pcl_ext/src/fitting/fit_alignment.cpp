@@ -26,14 +26,14 @@ void align_without_markers(FitState& s, TriMesh& aligned) {
   FitReport& rep = s.rep;
   const TriMesh& rest = s.templ();
   Eigen::Index n_roi = 0;
-  for (Eigen::Index i = 0; i < s.np; ++i) n_roi += s.roi_ok[std::size_t(i)];
+  for (Eigen::Index i = 0; i < s.cloud.np; ++i) n_roi += s.cloud.roi_ok[std::size_t(i)];
   Eigen::MatrixX3d cloud(n_roi, 3);
-  for (Eigen::Index i = 0, k = 0; i < s.np; ++i)
-    if (s.roi_ok[std::size_t(i)]) cloud.row(k++) = s.P.row(i);
+  for (Eigen::Index i = 0, k = 0; i < s.cloud.np; ++i)
+    if (s.cloud.roi_ok[std::size_t(i)]) cloud.row(k++) = s.cloud.P.row(i);
   SimilarityIcpOptions io;
   io.trim = 0.1;
   io.max_iterations = 60;
-  io.tolerance = 1e-6 * s.diag;
+  io.tolerance = 1e-6 * s.cloud.diag;
   io.max_points = 20000;
   io.stall_iterations = 0;  // as measured in docs/fitting.md
   // the same template and cloud give the same alignment: computed once per fit_template call

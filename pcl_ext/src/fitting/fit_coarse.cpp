@@ -58,12 +58,12 @@ Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, i
   std::vector<char> vok(std::size_t(nv), 1);
   for (std::size_t v = 0; v < s.masked.size() && v < vok.size(); ++v) vok[v] = !s.masked[v];
   const std::vector<Eigen::Index> vs = stride_sample(vok, 6000);
-  const std::vector<Eigen::Index> ps = stride_sample(s.roi_ok, 6000);
+  const std::vector<Eigen::Index> ps = stride_sample(s.cloud.roi_ok, 6000);
   const double cos_max = std::cos(s.u.coarse_normal_angle_deg * M_PI / 180.0);
   const int rounds = s.u.coarse_rounds;
-  const double r_start = s.u.coarse_radius * s.diag, r_end = std::max(2.0 * s.u.max_match_distance, 0.01 * s.diag);
+  const double r_start = s.u.coarse_radius * s.cloud.diag, r_end = std::max(2.0 * s.u.max_match_distance, 0.01 * s.cloud.diag);
   const double a_start = s.u.coarse_stiffness, a_end = s.u.coarse_final_stiffness;
-  const double tol = 1e-3 * s.diag;  // a round ends when the graph moves less (measured: same fit as 1e-4, 40 % fewer steps)
+  const double tol = 1e-3 * s.cloud.diag;  // a round ends when the graph moves less (measured: same fit as 1e-4, 40 % fewer steps)
   // the iterations need the sampled vertices only: their positions, and normals turned by the
   // graph (the blended node rotations applied to the rest normal); all vertices at the end
   const Eigen::MatrixX3d N0 = vertex_normals(X0, s.F);
@@ -85,15 +85,15 @@ Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, i
       for (std::size_t k = 0; k < vs.size(); ++k) {
         const Eigen::Vector3d x = Xs.row(Eigen::Index(k)).transpose();
         double d2 = 0;
-        const Eigen::Index c = s.search.nearest(x, &d2);
+        const Eigen::Index c = s.cloud.search.nearest(x, &d2);
         Pair p{int(vs[k]), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), -1};
-        if (c >= 0 && s.roi_ok[std::size_t(c)] && std::sqrt(d2) < radius && s.N.row(c).dot(Ns.row(Eigen::Index(k))) > cos_max)
-          p = Pair{int(vs[k]), s.P.row(c).transpose(), s.N.row(c).transpose(), std::sqrt(d2)};
+        if (c >= 0 && s.cloud.roi_ok[std::size_t(c)] && std::sqrt(d2) < radius && s.N.row(c).dot(Ns.row(Eigen::Index(k))) > cos_max)
+          p = Pair{int(vs[k]), s.cloud.P.row(c).transpose(), s.N.row(c).transpose(), std::sqrt(d2)};
         fwd[k] = p;
       }
 #pragma omp parallel for schedule(static)
       for (std::size_t k = 0; k < ps.size(); ++k) {
-        const Eigen::Vector3d q = s.P.row(ps[k]).transpose();
+        const Eigen::Vector3d q = s.cloud.P.row(ps[k]).transpose();
         double d2 = 0;
         const Eigen::Index j = xs.nearest(q, &d2);
         Pair p{-1, q, s.N.row(ps[k]).transpose(), -1};

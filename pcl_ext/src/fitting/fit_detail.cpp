@@ -31,12 +31,12 @@ void detail_rounds(FitState& s) {
   if (!(u.detail_rounds > 0 && u.max_iterations > 0 && !u.laplacian_updating && !u.remeshing)) return;
   Eigen::MatrixX3d& V = s.V;
   const Eigen::MatrixX3i& F = s.F;
-  const Eigen::MatrixX3d& P = s.P;
+  const Eigen::MatrixX3d& P = s.cloud.P;
   const Eigen::MatrixX3d& N = s.N;
-  const std::vector<char>& roi_ok = s.roi_ok;
+  const std::vector<char>& roi_ok = s.cloud.roi_ok;
   const std::vector<VertexStatus>& status = s.status;
-  const PointSearch& search = s.search;
-  const Eigen::Index np = s.np;
+  const PointSearch& search = s.cloud.search;
+  const Eigen::Index np = s.cloud.np;
   const double cos_max = s.cos_max;
   const auto t0 = Clock::now();
   report_progress(s.progress, 0.9, "detail rounds");

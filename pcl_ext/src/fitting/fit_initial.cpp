@@ -101,7 +101,7 @@ void initial_pose(FitState& s) {
   try {
     s.V = s.D.deform();
   } catch (const InvalidInput& e) {
-    throw InvalidInput(s.who + "the markers cannot pose the template: " + e.what());
+    throw InvalidInput(std::string(kWho) + "the markers cannot pose the template: " + e.what());
   }
   rep.t_initial = seconds_since(t0);
   const auto& dr = s.D.report();
@@ -119,10 +119,10 @@ void orient_cloud_normals(FitState& s) {
   if (!s.orient) return;
   const PointSearch vt(s.V);
   const Eigen::MatrixX3d VN = vertex_normals(s.V, s.F);
-  const Eigen::Index np = s.np;
+  const Eigen::Index np = s.cloud.np;
 #pragma omp parallel for schedule(static)
   for (Eigen::Index i = 0; i < np; ++i) {
-    const Eigen::Index j = vt.nearest(s.P.row(i).transpose());
+    const Eigen::Index j = vt.nearest(s.cloud.P.row(i).transpose());
     if (j >= 0 && s.N.row(i).dot(VN.row(j)) < 0) s.N.row(i) *= -1;
   }
   if (s.u.consistent_normals) {
@@ -130,10 +130,10 @@ void orient_cloud_normals(FitState& s) {
     Eigen::VectorXd confidence(np);
 #pragma omp parallel for schedule(static)
     for (Eigen::Index i = 0; i < np; ++i) {
-      const Eigen::Index j = vt.nearest(s.P.row(i).transpose());
+      const Eigen::Index j = vt.nearest(s.cloud.P.row(i).transpose());
       confidence(i) = j >= 0 ? std::abs(s.N.row(i).dot(VN.row(j))) : 0.0;
     }
-    const NormalOrientationResult o = orient_normals_consistently(s.search, s.N, confidence, s.u.normal_neighbours);
+    const NormalOrientationResult o = orient_normals_consistently(s.cloud.search, s.N, confidence, s.u.normal_neighbours);
     s.rep.normals_flipped_for_consistency = o.flipped;
     s.rep.t_normals += seconds_since(tc);
     logger()->debug("[TemplateFitting] consistent normals: {} pairs, {} components, {} conflicts, {} flipped", o.edges,

@@ -149,7 +149,7 @@ void anchor_free_components(FitState& s, const Eigen::MatrixX3d& X, const Eigen:
 bool iterate_fit(FitState& s) {
   FitReport& rep = s.rep;
   const FitParameters& u = s.u;
-  const double diag = s.diag;
+  const double diag = s.cloud.diag;
   Eigen::MatrixX3d& V = s.V;
   s.matched.assign(std::size_t(V.rows()), 0);
   s.target = V;

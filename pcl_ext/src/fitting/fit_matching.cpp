@@ -120,11 +120,11 @@ bool match_vertices(FitState& s, double r, bool frozen_phase, const std::vector<
                     Eigen::VectorXd& match_scale) {
   const FitParameters& u = s.u;
   const Eigen::MatrixX3d& V = s.V;
-  const Eigen::MatrixX3d& P = s.P;
+  const Eigen::MatrixX3d& P = s.cloud.P;
   const Eigen::MatrixX3d& N = s.N;
-  const std::vector<char>& roi_ok = s.roi_ok;
+  const std::vector<char>& roi_ok = s.cloud.roi_ok;
   const std::vector<char>& masked = s.masked;
-  const PointSearch& search = s.search;
+  const PointSearch& search = s.cloud.search;
   const double cos_max = s.cos_max;
   std::vector<char>& matched = s.matched;
   Eigen::MatrixX3d& target = s.target;
@@ -138,7 +138,7 @@ bool match_vertices(FitState& s, double r, bool frozen_phase, const std::vector<
   std::optional<BinnedCloud> binned;
   if (u.binned_matching && !frozen_phase && !u.laplacian_updating && !u.remeshing && r > u.max_match_distance) {
     BinnedCloud b = bin_cloud(P, N, roi_ok, r / 3);
-    if (2 * b.count.rows() < s.np) binned = std::move(b);
+    if (2 * b.count.rows() < s.cloud.np) binned = std::move(b);
   }
   auto& nb_cache = cache.nb;
   auto& nb_cache_at = cache.at;

@@ -19,10 +19,10 @@ void compute_metrics(FitState& s, int known_crossings) {
   const FitParameters& u = s.u;
   const Eigen::MatrixX3d& V = s.V;
   const Eigen::MatrixX3i& F = s.F;
-  const Eigen::MatrixX3d& P = s.P;
-  const std::vector<char>& roi_ok = s.roi_ok;
-  const Eigen::Index np = s.np;
-  const double diag = s.diag;
+  const Eigen::MatrixX3d& P = s.cloud.P;
+  const std::vector<char>& roi_ok = s.cloud.roi_ok;
+  const Eigen::Index np = s.cloud.np;
+  const double diag = s.cloud.diag;
   report_progress(s.progress, 0.95, "metrics");
   const auto t0 = Clock::now();
   {

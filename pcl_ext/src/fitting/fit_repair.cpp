@@ -25,8 +25,8 @@ int flipped_faces(const FitState& s, const Eigen::MatrixX3d& X, const Eigen::Mat
   for (Eigen::Index f = 0; f < F.rows(); ++f) {
     const Eigen::Vector3d c = (X.row(F(f, 0)) + X.row(F(f, 1)) + X.row(F(f, 2))).transpose() / 3.0;
     double d2 = 0;
-    const Eigen::Index k = s.search.nearest(c, &d2);
-    flipped += k >= 0 && s.roi_ok[std::size_t(k)] && d2 < r2 && FN.row(f).dot(NR.row(k)) < -0.5;
+    const Eigen::Index k = s.cloud.search.nearest(c, &d2);
+    flipped += k >= 0 && s.cloud.roi_ok[std::size_t(k)] && d2 < r2 && FN.row(f).dot(NR.row(k)) < -0.5;
   }
   return flipped;
 }
@@ -62,8 +62,8 @@ namespace {
 Eigen::Vector3d pleat_reference(FitState& s, const Eigen::MatrixX3d& NC, const Eigen::Vector3d& c) {
   const double r2 = s.u.max_match_distance * s.u.max_match_distance;
   double d2 = 0;
-  const Eigen::Index k = s.search.nearest(c, &d2);
-  if (k < 0 || !s.roi_ok[std::size_t(k)] || d2 >= r2) return Eigen::Vector3d::Zero();
+  const Eigen::Index k = s.cloud.search.nearest(c, &d2);
+  if (k < 0 || !s.cloud.roi_ok[std::size_t(k)] || d2 >= r2) return Eigen::Vector3d::Zero();
   return NC.row(k).transpose();
 }
 

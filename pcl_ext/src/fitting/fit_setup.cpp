@@ -24,7 +24,7 @@ bool inside(const Eigen::Vector3d& p, const std::vector<Sphere>& s, const std::v
 void derive_parameters(FitState& s, const FitParameters& params) {
   FitParameters& u = s.u;
   u = params;
-  const double diag = s.diag;
+  const double diag = s.cloud.diag;
   if (u.max_match_distance == 0) u.max_match_distance = std::max(3 * s.rep.point_spacing, 0.005 * diag);
   if (u.initial_match_distance == 0) u.initial_match_distance = std::max(u.max_match_distance, 0.03 * diag);
   if (u.tolerance == 0) u.tolerance = 2e-4 * diag;
@@ -54,7 +54,7 @@ const Eigen::MatrixX3d& FitState::consistentNormals() {
   if (!rep.normals_estimated || u.consistent_normals) return N;
   if (!nc_ready_) {
     NC_ = N;
-    orient_normals_consistently(search, NC_, Eigen::VectorXd::Ones(np), u.normal_neighbours);
+    orient_normals_consistently(cloud.search, NC_, Eigen::VectorXd::Ones(cloud.np), u.normal_neighbours);
     nc_ready_ = true;
   }
   return NC_;
@@ -135,7 +135,7 @@ void use_cloud(FitState& s, const FitParameters& params, bool orient_normals) {
 }
 
 void prepare_markers(FitState& s, const Eigen::MatrixX3d& P_in, const RegionOfInterest& roi) {
-  const std::string& who = s.who;
+  const std::string who = kWho;
   const auto& markers = s.markers;
   const Eigen::Index nv0 = s.templ().V.rows();
   for (std::size_t k = 0; k < markers.size(); ++k) {

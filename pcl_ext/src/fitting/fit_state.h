@@ -55,25 +55,19 @@ struct PreparedCloud {
 struct FitState {
   FitState(const TriMesh& t, const std::vector<FitMarker>& m, const ProgressCallback& p, FitReport& r,
            std::vector<VertexStatus>& st, const PreparedCloud& c)
-      : markers(m), progress(p), rep(r), status(st), u(r.used), cloud(c), np(c.np), P(c.P), N(c.N), roi_ok(c.roi_ok),
-        diag(c.diag), search(c.search), templ_(&t) {}
+      : markers(m), progress(p), rep(r), status(st), u(r.used), cloud(c), N(c.N), templ_(&t) {}
 
   const std::vector<FitMarker>& markers;
   const ProgressCallback& progress;
   FitReport& rep;
   std::vector<VertexStatus>& status;
   FitParameters& u;  ///< the parameters used (rep.used: automatic values filled in)
-  const std::string who = kWho;
 
-  // the cloud (finite points only: P, N have np rows), roi_ok per point; shared, read-only,
-  // except N: this fit's copy, oriented by its posed template (orient_cloud_normals)
+  // the cloud (finite points only: cloud.P and N have cloud.np rows), cloud.roi_ok per point;
+  // shared, read-only, except N: this fit's copy of cloud.N, oriented by its posed template
+  // (orient_cloud_normals)
   const PreparedCloud& cloud;
-  const Eigen::Index np;
-  const Eigen::MatrixX3d& P;
   Eigen::MatrixX3d N;
-  const std::vector<char>& roi_ok;
-  const double diag;  ///< bounding-box diagonal of the ROI points
-  const PointSearch& search;
   bool orient = false;  ///< orient N by the posed template (estimated or unreliable normals)
   double cos_max = 0;   ///< cos θ_max
 

@@ -18,9 +18,9 @@ bool remesh_step(FitState& s, double r) {
   FitReport& rep = s.rep;
   Eigen::MatrixX3d& V = s.V;
   Eigen::MatrixX3i& F = s.F;
-  const Eigen::MatrixX3d& P = s.P;
-  const std::vector<char>& roi_ok = s.roi_ok;
-  const Eigen::Index np = s.np;
+  const Eigen::MatrixX3d& P = s.cloud.P;
+  const std::vector<char>& roi_ok = s.cloud.roi_ok;
+  const Eigen::Index np = s.cloud.np;
   Eigen::MatrixX3d& V0 = s.V0;
   std::vector<char>& masked = s.masked;
   std::vector<char>& matched = s.matched;
@@ -72,7 +72,7 @@ void fairing_step(FitState& s, double r) {
   const std::vector<char>& masked = s.masked;
   const std::vector<char>& matched = s.matched;
   const Eigen::MatrixX3d& N = s.N;
-  const PointSearch& search = s.search;
+  const PointSearch& search = s.cloud.search;
   const double cos_max = s.cos_max;
   FitReport& rep = s.rep;
   const auto tm = Clock::now();
