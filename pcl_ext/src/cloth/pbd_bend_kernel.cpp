@@ -59,6 +59,8 @@ TBSP_BEND_INLINE v4 fast_acos(v4 x) {
 }  // namespace
 
 TBSP_BEND_CLONES void project_bend_quad(const BendQuad& q, const double* inv_mass, double* pred) {
+  // Bender's PBD dihedral constraint (gradients of Bridson et al. 2003): p2-p3 the edge, p0 and
+  // p1 the wings; φ = acos(n1·n2), C = φ − φ_rest (eq. 10.3)
   const V3 p0 = gather(pred, q.i0), p1 = gather(pred, q.i1), p2 = gather(pred, q.i2), p3 = gather(pred, q.i3);
   const v4 w0 = gather1(inv_mass, q.i0), w1 = gather1(inv_mass, q.i1), w2 = gather1(inv_mass, q.i2), w3 = gather1(inv_mass, q.i3);
   const v4 k{q.k[0], q.k[1], q.k[2], q.k[3]}, rest{q.rest[0], q.rest[1], q.rest[2], q.rest[3]};
@@ -74,6 +76,7 @@ TBSP_BEND_CLONES void project_bend_quad(const BendQuad& q, const double* inv_mas
   const V3 d0 = elen * n1, d1 = elen * n2;
   const V3 d2 = (dot(p0 - p3, e) / elen) * n1 + (dot(p1 - p3, e) / elen) * n2;
   const V3 d3 = (dot(p2 - p0, e) / elen) * n1 + (dot(p2 - p1, e) / elen) * n2;
+  // cos φ = N1·N2 / (|N1||N2|); here n = N/|N|², so |n1||n2| = 1/(|N1||N2|)
   v4 cosphi = dot(n1, n2) / vsqrt(dot(n1, n1) * dot(n2, n2));
   cosphi = select(cosphi < -1, splat(-1), cosphi);  // std::clamp(cosphi, -1, 1)
   cosphi = select(splat(1) < cosphi, splat(1), cosphi);
