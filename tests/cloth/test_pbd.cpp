@@ -161,6 +161,56 @@ TEST(PbdCloth, SameInputSameBitsForAnyThreadCount) {
   EXPECT_EQ((b - c).cwiseAbs().maxCoeff(), 0.0);
 }
 
+// A free sheet falling onto a kinematic one (vertex grids aligned, 1 cm apart in x and y):
+// self-collision holds it at the contact distance 2 × thickness; without it, it falls through.
+// `far`: a kinematic triangle 10 km away is added, which makes the contact grid's box too large
+// for the dense grid, so the hashed one finds the pairs: the sheets' bits must not change.
+namespace {
+struct TwoSheets {
+  int free_from = 0, free_to = 0;
+  Eigen::MatrixX3d V;
+  PbdClothSimulator sim;
+  TwoSheets(bool self, bool far) {
+    const TriMesh g = make_grid(20, 20, 0.4, 0.4);
+    const Eigen::Index m = g.V.rows();
+    V.resize(2 * m + (far ? 3 : 0), 3);
+    Eigen::MatrixX3i F(2 * g.F.rows() + (far ? 1 : 0), 3);
+    V.topRows(m) = g.V;
+    V.middleRows(m, m) = g.V;
+    V.middleRows(m, m).col(2).array() += 0.03;
+    F.topRows(g.F.rows()) = g.F;
+    F.middleRows(g.F.rows(), g.F.rows()) = g.F.array() + int(m);
+    if (far) {
+      V.bottomRows(3) << 1e4, 0, 0, 1e4 + 0.01, 0, 0, 1e4, 0.01, 0;
+      F.bottomRows(1) << int(2 * m), int(2 * m + 1), int(2 * m + 2);
+    }
+    sim.setMesh(V, F);
+    Eigen::VectorXd delta = Eigen::VectorXd::Zero(V.rows());
+    delta.segment(m, m).setOnes();
+    free_from = int(m), free_to = int(2 * m);
+    sim.setClothness(delta);
+    PbdSettings st;
+    st.gravity = Eigen::Vector3d(0, 0, -9.81);
+    st.self_collision = self;
+    sim.setSettings(st);
+    for (int f = 0; f < 30; ++f) sim.step(V);
+  }
+  double lowest() const { return sim.positions().middleRows(free_from, free_to - free_from).col(2).minCoeff(); }
+};
+}  // namespace
+
+TEST(PbdCloth, SelfCollisionHoldsAFallingSheetOnAnotherWithEitherContactGrid) {
+  const TwoSheets held(true, false), through(false, false), far(true, true);
+  const double s = 2 * PbdSettings{}.thickness;
+  EXPECT_GT(held.sim.numSelfContacts(), 100);
+  EXPECT_GT(held.lowest(), 0.9 * s);
+  EXPECT_LT(held.lowest(), 1.5 * s);
+  EXPECT_LT(through.lowest(), -0.1);  // nothing held it
+  const Eigen::Index n = held.sim.positions().rows();
+  EXPECT_EQ((held.sim.positions() - far.sim.positions().topRows(n)).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(held.sim.numSelfContacts(), far.sim.numSelfContacts());
+}
+
 TEST(PbdCloth, BadInputIsAClearError) {
   PbdClothSimulator sim;
   EXPECT_THROW(sim.step(Eigen::MatrixX3d()), InvalidInput);  // no mesh

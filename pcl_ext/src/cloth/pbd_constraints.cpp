@@ -137,12 +137,22 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
             std::size_t(std::uint32_t(c.z()) * 83492791u)) & (buckets - 1);
   };
   std::vector<Eigen::Vector3i> cells(n);
-  std::vector<int> start(buckets + 1, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    cells[i] = coord(pos_[i]);
-    ++start[hash(cells[i]) + 1];
-  }
-  for (std::size_t b = 0; b < buckets; ++b) start[b + 1] += start[b];
+  for (std::size_t i = 0; i < n; ++i) cells[i] = coord(pos_[i]);
+  // A dense grid over the cells' bounding box when it is small (any cloth of sane extent: the
+  // bench's skirt ~40k cells): the cells of an x-row are then adjacent, so a vertex reads each
+  // row in its reach as one run (~5 runs instead of 13 hashed buckets). Otherwise (a vertex far
+  // from the rest) the hash.
+  Eigen::Vector3i clo = cells[0], chi = cells[0];
+  for (const auto& c : cells) clo = clo.cwiseMin(c), chi = chi.cwiseMax(c);
+  const long long dx = (long long)chi.x() - clo.x() + 1, dy = (long long)chi.y() - clo.y() + 1, dz = (long long)chi.z() - clo.z() + 1;
+  const bool dense = dx * dy <= 1LL << 40 && dx * dy * dz <= std::max<long long>(4096, 8 * (long long)n);
+  const std::size_t slots = dense ? std::size_t(dx * dy * dz) : buckets;
+  auto slot = [&](const Eigen::Vector3i& c) {
+    return dense ? std::size_t((c.x() - clo.x()) + dx * ((c.y() - clo.y()) + dy * (long long)(c.z() - clo.z()))) : hash(c);
+  };
+  std::vector<int> start(slots + 1, 0);
+  for (std::size_t i = 0; i < n; ++i) ++start[slot(cells[i]) + 1];
+  for (std::size_t b = 0; b < slots; ++b) start[b + 1] += start[b];
   // each entry carries what the search tests first (its cell, travel and position), so a bucket is
   // read as one contiguous run instead of three scattered lookups per candidate
   struct Entry {
@@ -155,7 +165,7 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
   {
     std::vector<int> fill(start.begin(), start.end() - 1);
     for (std::size_t i = 0; i < n; ++i) {
-      const int q = fill[hash(cells[i])]++;
+      const int q = fill[slot(cells[i])]++;
       packed[std::size_t(q)] = {pos_[i], travel[i], cells[i], int(i)};
     }
   }
@@ -180,17 +190,32 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
       const double g = k < cells[i][a] ? p[a] - (k + 1) * cell : k > cells[i][a] ? k * cell - p[a] : 0.0;
       return g > 0 ? g * g : 0.0;
     };
+    auto test = [&](const Entry& e) {
+      const std::size_t j = std::size_t(e.j);
+      if (j == i) return;
+      if (e.travel > ti || (e.travel == ti && j > i)) return;  // found from j
+      if ((p - e.p).squaredNorm() > reach * reach) return;
+      if (fixed_i && inv_mass_[j] == 0) return;
+      if ((r - rest_.row(Eigen::Index(j)).transpose()).squaredNorm() < exclude * exclude) return;
+      out.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
+    };
+    if (dense) {  // rows of the box within reach; each row's cells x0..x1 are one run of entries
+      const int x0 = std::max(lo[0], clo.x()), x1 = std::min(hi[0], chi.x());
+      for (int y = std::max(lo[1], clo.y()); y <= std::min(hi[1], chi.y()); ++y) {
+        const double gy = gap(1, y);
+        if (gy > rm2) continue;
+        for (int z = std::max(lo[2], clo.z()); z <= std::min(hi[2], chi.z()); ++z) {
+          if (x0 > x1 || gy + gap(2, z) > rm2) continue;
+          const std::size_t row = slot(Eigen::Vector3i(x0, y, z));
+          for (const Entry* e = packed.data() + start[row], *end = packed.data() + start[row + std::size_t(x1 - x0) + 1]; e != end; ++e) test(*e);
+        }
+      }
+      return;
+    }
     auto visit = [&](const Eigen::Vector3i& cc) {
       const std::size_t h = hash(cc);
-      for (const Entry* e = packed.data() + start[h], *end = packed.data() + start[h + 1]; e != end; ++e) {
-        const std::size_t j = std::size_t(e->j);
-        if (j == i || e->cell != cc) continue;
-        if (e->travel > ti || (e->travel == ti && j > i)) continue;  // found from j
-        if ((p - e->p).squaredNorm() > reach * reach) continue;
-        if (fixed_i && inv_mass_[j] == 0) continue;
-        if ((r - rest_.row(Eigen::Index(j)).transpose()).squaredNorm() < exclude * exclude) continue;
-        out.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
-      }
+      for (const Entry* e = packed.data() + start[h], *end = packed.data() + start[h + 1]; e != end; ++e)
+        if (e->cell == cc) test(*e);
     };
     for (int x = lo[0]; x <= hi[0]; ++x) {
       const double gx = gap(0, x);
