@@ -145,7 +145,8 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
   Eigen::Vector3i clo = cells[0], chi = cells[0];
   for (const auto& c : cells) clo = clo.cwiseMin(c), chi = chi.cwiseMax(c);
   const long long dx = (long long)chi.x() - clo.x() + 1, dy = (long long)chi.y() - clo.y() + 1, dz = (long long)chi.z() - clo.z() + 1;
-  const bool dense = dx * dy <= 1LL << 40 && dx * dy * dz <= std::max<long long>(4096, 8 * (long long)n);
+  const long long cap = std::max<long long>(4096, 8 * (long long)n);  // each factor checked first: no overflow
+  const bool dense = dx <= cap && dy <= cap && dz <= cap && dx * dy <= cap && dx * dy * dz <= cap;
   const std::size_t slots = dense ? std::size_t(dx * dy * dz) : buckets;
   auto slot = [&](const Eigen::Vector3i& c) {
     return dense ? std::size_t((c.x() - clo.x()) + dx * ((c.y() - clo.y()) + dy * (long long)(c.z() - clo.z()))) : hash(c);
