@@ -126,7 +126,8 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
   // cell: the search of 90 % of the vertices stays within 3×3×3 cells; the fastest one's within 9×9×9
   const double tmax = *std::max_element(travel.begin(), travel.end());
   const double cell = std::max(s + 2 * sorted_travel[n * 9 / 10], (s + 2 * tmax) / 4);
-  // hashed uniform grid, counting sort: bucket b holds its vertices in increasing index order
+  // uniform grid, counting sort: slot b (a cell of the dense grid below, or a hash bucket) holds
+  // its vertices in increasing index order
   std::size_t buckets = 1;
   while (buckets < 2 * n) buckets <<= 1;
   auto coord = [&](const Eigen::Vector3d& p) {
@@ -202,11 +203,12 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
     };
     if (dense) {  // rows of the box within reach; each row's cells x0..x1 are one run of entries
       const int x0 = std::max(lo[0], clo.x()), x1 = std::min(hi[0], chi.x());
+      if (x0 > x1) return;
       for (int y = std::max(lo[1], clo.y()); y <= std::min(hi[1], chi.y()); ++y) {
         const double gy = gap(1, y);
         if (gy > rm2) continue;
         for (int z = std::max(lo[2], clo.z()); z <= std::min(hi[2], chi.z()); ++z) {
-          if (x0 > x1 || gy + gap(2, z) > rm2) continue;
+          if (gy + gap(2, z) > rm2) continue;
           const std::size_t row = slot(Eigen::Vector3i(x0, y, z));
           for (const Entry* e = packed.data() + start[row], *end = packed.data() + start[row + std::size_t(x1 - x0) + 1]; e != end; ++e) test(*e);
         }
