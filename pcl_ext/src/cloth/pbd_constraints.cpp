@@ -5,6 +5,7 @@
 
 #include "tbsp/cloth/pbd_cloth_simulator.h"
 #include "pbd_bend_kernel.h"
+#include "pbd_contact_kernel.h"
 
 namespace tbsp {
 
@@ -155,25 +156,29 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
   std::vector<int> start(slots + 1, 0);
   for (std::size_t i = 0; i < n; ++i) ++start[slot(cells[i]) + 1];
   for (std::size_t b = 0; b < slots; ++b) start[b + 1] += start[b];
-  // each entry carries what the search tests first (its cell, travel and position), so a bucket is
-  // read as one contiguous run instead of three scattered lookups per candidate
-  struct Entry {
-    Eigen::Vector3d p;
-    double travel;
-    Eigen::Vector3i cell;
-    int j;
-  };
-  std::vector<Entry> packed(n);
+  // the entries in slot order as separate arrays (what the search tests first: position, travel,
+  // vertex; and the cell, for the hash), so a run of slots is read as contiguous arrays and
+  // tested four entries at a time (pbd_contact_kernel.cpp)
+  std::vector<double> ex(n + 3), ey(n + 3), ez(n + 3), etravel(n + 3);  // + 3: the kernel reads groups of four
+  std::vector<int> ej(n + 3);
+  std::vector<Eigen::Vector3i> ecell(dense ? 0 : n);
   {
     std::vector<int> fill(start.begin(), start.end() - 1);
     for (std::size_t i = 0; i < n; ++i) {
-      const int q = fill[slot(cells[i])]++;
-      packed[std::size_t(q)] = {pos_[i], travel[i], cells[i], int(i)};
+      const std::size_t q = std::size_t(fill[slot(cells[i])]++);
+      ex[q] = pos_[i].x(), ey[q] = pos_[i].y(), ez[q] = pos_[i].z(), etravel[q] = travel[i], ej[q] = int(i);
+      if (!dense) ecell[q] = cells[i];
     }
   }
+  const detail::ContactEntries entries{ex.data(), ey.data(), ez.data(), etravel.data(), ej.data()};
   const double exclude = 2 * s;  // rest neighbours closer than this are not contacts
+  // Scratch of one block of the search: the runs of a vertex and the entries that pass the
+  // kernel's tests.
+  struct Scratch {
+    std::vector<int> begin, end, candidates;
+  };
   // The pairs vertex i finds (partners slower than it, within its reach, not rest neighbours).
-  auto search = [&](std::size_t i, std::vector<std::pair<int, int>>& out) {
+  auto search = [&](std::size_t i, std::vector<std::pair<int, int>>& out, Scratch& scratch) {
     const double reach = s + 2 * travel[i], ti = travel[i];
     const Eigen::Vector3d p = pos_[i];
     const Eigen::Vector3d r = rest_.row(Eigen::Index(i)).transpose();
@@ -192,11 +197,8 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
       const double g = k < cells[i][a] ? p[a] - (k + 1) * cell : k > cells[i][a] ? k * cell - p[a] : 0.0;
       return g > 0 ? g * g : 0.0;
     };
-    auto test = [&](const Entry& e) {
-      const std::size_t j = std::size_t(e.j);
-      if (j == i) return;
-      if (e.travel > ti || (e.travel == ti && j > i)) return;  // found from j
-      if ((p - e.p).squaredNorm() > reach * reach) return;
+    // the tests the kernel leaves: a pinned pair, rest neighbours
+    auto accept = [&](std::size_t j) {
       if (fixed_i && inv_mass_[j] == 0) return;
       if ((r - rest_.row(Eigen::Index(j)).transpose()).squaredNorm() < exclude * exclude) return;
       out.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
@@ -204,21 +206,36 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
     if (dense) {  // rows of the box within reach; each row's cells x0..x1 are one run of entries
       const int x0 = std::max(lo[0], clo.x()), x1 = std::min(hi[0], chi.x());
       if (x0 > x1) return;
+      scratch.begin.clear(), scratch.end.clear();
+      int total = 0;
       for (int y = std::max(lo[1], clo.y()); y <= std::min(hi[1], chi.y()); ++y) {
         const double gy = gap(1, y);
         if (gy > rm2) continue;
         for (int z = std::max(lo[2], clo.z()); z <= std::min(hi[2], chi.z()); ++z) {
           if (gy + gap(2, z) > rm2) continue;
           const std::size_t row = slot(Eigen::Vector3i(x0, y, z));
-          for (const Entry* e = packed.data() + start[row], *end = packed.data() + start[row + std::size_t(x1 - x0) + 1]; e != end; ++e) test(*e);
+          scratch.begin.push_back(start[row]);
+          scratch.end.push_back(start[row + std::size_t(x1 - x0) + 1]);
+          total += scratch.end.back() - scratch.begin.back();
         }
       }
+      if (scratch.candidates.size() < std::size_t(total) + 4) scratch.candidates.resize(std::size_t(total) + 4);
+      const double pp[3] = {p.x(), p.y(), p.z()};
+      const int found = detail::contact_candidates(entries, scratch.begin.data(), scratch.end.data(), int(scratch.begin.size()), pp, ti,
+                                                   int(i), reach * reach, scratch.candidates.data());
+      for (int c = 0; c < found; ++c) accept(std::size_t(ej[std::size_t(scratch.candidates[std::size_t(c)])]));
       return;
     }
     auto visit = [&](const Eigen::Vector3i& cc) {
       const std::size_t h = hash(cc);
-      for (const Entry* e = packed.data() + start[h], *end = packed.data() + start[h + 1]; e != end; ++e)
-        if (e->cell == cc) test(*e);
+      for (std::size_t q = std::size_t(start[h]); q < std::size_t(start[h + 1]); ++q) {
+        if (ecell[q] != cc) continue;
+        const std::size_t j = std::size_t(ej[q]);
+        if (etravel[q] > ti || (etravel[q] == ti && j >= i)) continue;  // found from j (or j is i)
+        const double dx = p.x() - ex[q], dy = p.y() - ey[q], dz = p.z() - ez[q];
+        if ((dx * dx + dy * dy) + dz * dz > reach * reach) continue;
+        accept(j);
+      }
     };
     for (int x = lo[0]; x <= hi[0]; ++x) {
       const double gx = gap(0, x);
@@ -238,8 +255,10 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
   const std::size_t nblocks = (n + kBlock - 1) / kBlock;
   std::vector<std::vector<std::pair<int, int>>> found(nblocks);
 #pragma omp parallel for schedule(dynamic, 1) if (n >= kParallelMin)
-  for (std::size_t b = 0; b < nblocks; ++b)
-    for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) search(i, found[b]);
+  for (std::size_t b = 0; b < nblocks; ++b) {
+    Scratch scratch;
+    for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) search(i, found[b], scratch);
+  }
   // sorted (first, second): a counting sort by the first vertex, then each vertex's few partners
   // sorted (the same order as sorting the whole list, which took a tenth of a simulation)
   std::vector<int> first_start(n + 1, 0);
