@@ -6,6 +6,7 @@
 #include "tbsp/cloth/pbd_cloth_simulator.h"
 #include "pbd_bend_kernel.h"
 #include "pbd_contact_kernel.h"
+#include "pbd_stretch_kernel.h"
 
 namespace tbsp {
 
@@ -18,23 +19,6 @@ double per_iteration(double k, int n) { return k >= 1 ? 1.0 : 1.0 - std::pow(1.0
 // Largest bending stiffness of one sweep: the linearised dihedral projection overshoots and
 // can diverge at full stiffness (k_bend = 1 would give 1 per sweep).
 constexpr double kMaxBendSweep = 0.5;
-
-// Sweeps the colours of a constraint graph: each colour split over the threads of the enclosing
-// parallel region (static schedule: the same split every time), the conflict colour (if any) by
-// one thread.
-template <class One>
-void sweep_colours(const std::vector<std::vector<int>>& colours, std::size_t conflict, One one) {
-  for (std::size_t ci = 0; ci < colours.size(); ++ci) {
-    const auto& colour = colours[ci];
-    if (ci == conflict) {
-#pragma omp single
-      for (int q : colour) one(q);
-    } else {
-#pragma omp for schedule(static)
-      for (std::size_t q = 0; q < colour.size(); ++q) one(colour[q]);
-    }
-  }
-}
 
 }  // namespace
 
@@ -51,21 +35,25 @@ void PbdClothSimulator::applyExternal(double dt) {
     const Eigen::Vector3d& a = pos_[std::size_t(F_(Eigen::Index(f), 0))];
     face_normal_[f] = (pos_[std::size_t(F_(Eigen::Index(f), 1))] - a).cross(pos_[std::size_t(F_(Eigen::Index(f), 2))] - a);
   }
+  // then drag and gravity, f_d = −½ A h (d_n |u_n|² n̂ + d_t u_t) with A = m (the acceleration is
+  // f_d / m), four vertices per call of the vector kernel (pbd_stretch_kernel.cpp)
+  static_assert(sizeof(Eigen::Vector3d) == 3 * sizeof(double), "vel_ is read as packed xyz");
+  const double g[3] = {settings_.gravity.x(), settings_.gravity.y(), settings_.gravity.z()};
 #pragma omp for schedule(static)
-  for (std::size_t i = 0; i < n; ++i) {
-    if (inv_mass_[i] == 0) continue;
-    Eigen::Vector3d normal = Eigen::Vector3d::Zero();
-    for (int q = vf_offsets_[i]; q < vf_offsets_[i + 1]; ++q) normal += face_normal_[std::size_t(vf_faces_[std::size_t(q)])];
-    const ClothMaterial& m = materials_[std::size_t(region_(Eigen::Index(i)))];
-    Eigen::Vector3d acc = settings_.gravity;
-    const double len = normal.norm();
-    if (len > 0 && h > 0) {
-      // f_d = −½ A h (d_n |u_n|² n̂ + d_t u_t), A = m: the acceleration is f_d / m
-      const Eigen::Vector3d nn = normal / len;
-      const Eigen::Vector3d un = vel_[i].dot(nn) * nn, ut = vel_[i] - un;
-      acc -= 0.5 * h * (m.d_n * un.norm() / unit * un + m.d_t * ut);
+  for (std::size_t q4 = 0; q4 < (n + 3) / 4; ++q4) {
+    detail::DragQuad q;
+    for (int l = 0; l < 4; ++l) {
+      const std::size_t i = 4 * q4 + std::size_t(l);
+      q.active[l] = i < n && inv_mass_[i] != 0;
+      q.vertex[l] = int(std::min(i, n - 1));
+      Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+      if (q.active[l])
+        for (int f = vf_offsets_[i]; f < vf_offsets_[i + 1]; ++f) normal += face_normal_[std::size_t(vf_faces_[std::size_t(f)])];
+      q.nx[l] = normal.x(), q.ny[l] = normal.y(), q.nz[l] = normal.z();
+      const ClothMaterial& m = materials_[std::size_t(region_(Eigen::Index(q.vertex[l])))];
+      q.d_n[l] = m.d_n, q.d_t[l] = m.d_t;
     }
-    vel_[i] += dt * acc;
+    detail::apply_drag_quad(q, g, h, unit, dt, vel_.data()->data());
   }
   }
 }
@@ -281,20 +269,27 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
 // outside a parallel region they run serially. Colours share no vertex, so the result does not
 // depend on the thread count.
 void PbdClothSimulator::projectStretch(double k) {
-  auto one = [&](int index) {
-    const Stretch& c = stretch_[std::size_t(index)];
-    const double wa = inv_mass_[std::size_t(c.a)], wb = inv_mass_[std::size_t(c.b)];
-    if (wa + wb == 0) return;
-    Eigen::Vector3d& pa = pred_[std::size_t(c.a)];
-    Eigen::Vector3d& pb = pred_[std::size_t(c.b)];
-    const Eigen::Vector3d d = pa - pb;
-    const double len = d.norm();
-    if (len < 1e-12) return;
-    const Eigen::Vector3d corr = (k * (len - c.rest) / ((wa + wb) * len)) * d;
-    pa -= wa * corr;
-    pb += wb * corr;
-  };
-  sweep_colours(stretch_colours_, stretch_conflict_colour_, one);
+  // C = |p_a − p_b| − rest (eq. 10.2), four constraints of a colour per call of the vector kernel
+  // (pbd_stretch_kernel.cpp); the conflict colour one at a time, in order
+  double* P = pred_.data()->data();
+  for (std::size_t ci = 0; ci < stretch_colours_.size(); ++ci) {
+    const auto& colour = stretch_colours_[ci];
+    auto project = [&](std::size_t from, int lanes) {
+      detail::StretchQuad q;
+      for (int l = 0; l < lanes; ++l) {
+        const Stretch& c = stretch_[std::size_t(colour[from + std::size_t(l)])];
+        q.a[l] = c.a, q.b[l] = c.b, q.rest[l] = c.rest;
+      }
+      detail::project_stretch_quad(q, lanes, k, inv_mass_.data(), P);
+    };
+    if (ci == stretch_conflict_colour_) {
+#pragma omp single
+      for (std::size_t c = 0; c < colour.size(); ++c) project(c, 1);
+    } else {
+#pragma omp for schedule(static)
+      for (std::size_t g = 0; g < (colour.size() + 3) / 4; ++g) project(4 * g, int(std::min<std::size_t>(4, colour.size() - 4 * g)));
+    }
+  }
 }
 
 void PbdClothSimulator::projectBend(const std::vector<double>& kr) {
