@@ -53,7 +53,11 @@ int main(int argc, char** argv) {
   tbsp::request_huge_pages();
   int last_error = ENOENT;
   for (const std::string& path : candidates) {
-    if (dir.empty() || access(path.c_str(), X_OK) != 0) continue;
+    if (dir.empty()) break;
+    if (access(path.c_str(), X_OK) != 0) {
+      if (errno != ENOENT) last_error = errno;  // there but not executable (EACCES): say so below
+      continue;
+    }
     execv(path.c_str(), argv);
     last_error = errno;  // found but could not be executed: report it below
   }

@@ -2,9 +2,12 @@
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -256,5 +259,12 @@ TEST(Cli, LauncherPassesThroughAndNamesAMissingCli) {
   EXPECT_NE(r.err.find("tbsp-cli"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find((dir / "bin").string()), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("Fix:"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find(std::strerror(ENOENT)), std::string::npos) << r.err;
+  // a tbsp-cli that is there but not executable: the reason is the permission, not absence
+  std::ofstream(dir / "bin" / "tbsp-cli") << "#!/bin/sh\n";
+  std::filesystem::permissions(dir / "bin" / "tbsp-cli", std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+  r = run_cli("--version", dir, alone.string());
+  EXPECT_EQ(r.code, 127);
+  EXPECT_NE(r.err.find(std::strerror(EACCES)), std::string::npos) << r.err;  // (root too: no execute bit at all)
   std::filesystem::remove_all(dir);
 }
