@@ -8,11 +8,12 @@
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
+#include <opencv2/videoio.hpp>  // the CAP_PROP_* ids only: videos are read through video_reader.h
 #include <yaml-cpp/yaml.h>
 
 #include "tbsp/core/error.h"
 #include "tbsp/io/atomic_file.h"
+#include "video_reader.h"
 
 namespace fs = std::filesystem;
 
@@ -320,9 +321,16 @@ StudioCheck check_studio(const Studio& s, int max_listed) {
     if (!sc.video.empty()) {
       const std::string v = s.resolve(sc.video);
       if (exists(v)) {
-        cv::VideoCapture cap(v);
-        if (!cap.isOpened()) r.problems.push_back(cname + ": video '" + v + "' cannot be opened by OpenCV");
-        else {
+        detail::VideoReader cap;
+        std::string why;
+        try {
+          if (!cap.open(v)) why = " cannot be opened by OpenCV";
+        } catch (const FileError& e) {  // the video module is missing: an installation problem, listed
+          why = std::string(": ") + e.what();
+        }
+        if (!why.empty()) {
+          r.problems.push_back(cname + ": video '" + v + "'" + why);
+        } else {
           const double n = cap.get(cv::CAP_PROP_FRAME_COUNT);
           if (n > 0 && n < s.numFrames())
             r.problems.push_back(cname + ": video '" + v + "' has " + std::to_string(static_cast<long long>(n)) + " frames, the studio needs " + std::to_string(s.numFrames()));
@@ -351,7 +359,7 @@ struct StudioFrameStream::Impl {
   Studio studio;
   Options opt;
   int next = 0;
-  std::vector<cv::VideoCapture> videos;
+  std::vector<detail::VideoReader> videos;
   std::vector<int> video_pos;  // next frame index each video will deliver
   cv::Mat scratch;
 };

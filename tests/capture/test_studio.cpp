@@ -1,9 +1,14 @@
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <cstdlib>
 #include <fstream>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
+
+#include <cstdio>
+#include <cstdlib>
 
 #include "test_util.h"
 #include "tbsp/core/error.h"
@@ -140,6 +145,38 @@ TEST(Studio, VideoCamerasStream) {
   ASSERT_TRUE(st.next(fr));
   EXPECT_NEAR(fr.images[0].at<cv::Vec3b>(12, 16)[0], 120, 6);
   EXPECT_FALSE(st.next(fr));
+}
+
+// Videos are decoded by a module loaded on first use (capture_io/src/video_reader.h): without it
+// a video studio fails with a message naming the module and the fix, and nothing else breaks.
+TEST(Studio, AMissingVideoModuleIsNamedWithTheFix) {
+  const auto dir = test::temp_dir("studio_video_module");
+  Studio s = small_studio(dir, 1, 4);
+  cv::VideoWriter vw((dir / "cam0.avi").string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30, cv::Size(32, 24));
+  if (!vw.isOpened()) GTEST_SKIP() << "OpenCV has no MJPG writer here";
+  for (int f = 0; f < 4; ++f) vw.write(cv::Mat(24, 32, CV_8UC3, cv::Scalar(40 * f, 40 * f, 40 * f)));
+  vw.release();
+  s.cameras[0].images.clear();
+  s.cameras[0].video = "cam0.avi";
+  s.ground_truth.clear();
+  // in a fresh process (the module is loaded once per process): the variable names a file that
+  // is not there, so it is the only candidate and the stream reports it
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_EXIT(
+      {
+        setenv("TBSP_VIDEO_MODULE", "/nonexistent/libtbsp_video.so", 1);
+        const std::string problems = check_studio(s).summary();
+        StudioFrameStream st(s, {true, false, 10, 11, 1});
+        StudioFrame fr;
+        try {
+          st.next(fr);
+        } catch (const FileError& e) {
+          std::fprintf(stderr, "check: %s\nstream: %s\n", problems.c_str(), e.what());
+          std::exit(3);
+        }
+        std::exit(0);
+      },
+      ::testing::ExitedWithCode(3), "check: .*cam0.avi.*video module libtbsp_video.so(.|\n)*stream: .*/nonexistent/libtbsp_video.so \\(no such file\\)(.|\n)*Fix: .*TBSP_VIDEO_MODULE");
 }
 
 TEST(Studio, MalformedFilesGiveClearErrors) {
