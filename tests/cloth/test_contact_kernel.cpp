@@ -12,17 +12,18 @@
 using tbsp::detail::contact_candidates;
 using tbsp::detail::ContactEntries;
 
+// (names unique among the test files a unity build compiles together)
 namespace {
 
-struct Grid {
+struct ContactGrid {
   std::vector<double> x, y, z, travel;
   std::vector<int> j;
-  explicit Grid(std::size_t n) : x(n + 3), y(n + 3), z(n + 3), travel(n + 3), j(n + 3) {}  // + 3: the kernel's padding
+  explicit ContactGrid(std::size_t n) : x(n + 3), y(n + 3), z(n + 3), travel(n + 3), j(n + 3) {}  // + 3: the kernel's padding
   ContactEntries view() const { return {x.data(), y.data(), z.data(), travel.data(), j.data()}; }
 };
 
 // the scalar tests, written out from the kernel's contract
-std::vector<int> reference(const Grid& g, const std::vector<int>& b, const std::vector<int>& e, const double p[3], double ti, int i,
+std::vector<int> scalar_candidates(const ContactGrid& g, const std::vector<int>& b, const std::vector<int>& e, const double p[3], double ti, int i,
                            double reach2) {
   std::vector<int> out;
   for (std::size_t r = 0; r < b.size(); ++r)
@@ -35,7 +36,7 @@ std::vector<int> reference(const Grid& g, const std::vector<int>& b, const std::
   return out;
 }
 
-std::vector<int> run_kernel(const Grid& g, const std::vector<int>& b, const std::vector<int>& e, const double p[3], double ti, int i,
+std::vector<int> kernel_candidates(const ContactGrid& g, const std::vector<int>& b, const std::vector<int>& e, const double p[3], double ti, int i,
                             double reach2) {
   int total = 0;
   for (std::size_t r = 0; r < b.size(); ++r) total += e[r] - b[r];
@@ -49,7 +50,7 @@ std::vector<int> run_kernel(const Grid& g, const std::vector<int>& b, const std:
 
 TEST(PbdContactKernel, PassesExactlyTheEntriesTheScalarTestsPassInScanOrder) {
   const std::size_t n = 301;  // not a multiple of four: the last run reads into the padding
-  Grid g(n);
+  ContactGrid g(n);
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1, 1);
   for (std::size_t q = 0; q < n; ++q) {
@@ -71,7 +72,7 @@ TEST(PbdContactKernel, PassesExactlyTheEntriesTheScalarTestsPassInScanOrder) {
     const double p[3] = {u(rng), u(rng), u(rng)};
     const int i = int(t % n);
     const double ti = g.travel[std::size_t(t % n)], reach2 = 0.5 * (u(rng) + 1.2);
-    const std::vector<int> want = reference(g, b, e, p, ti, i, reach2), got = run_kernel(g, b, e, p, ti, i, reach2);
+    const std::vector<int> want = scalar_candidates(g, b, e, p, ti, i, reach2), got = kernel_candidates(g, b, e, p, ti, i, reach2);
     ASSERT_EQ(got, want) << "query " << t;
     passed += int(want.size());
     for (std::size_t r = 0; r < b.size(); ++r) tested += e[r] - b[r];
@@ -82,7 +83,7 @@ TEST(PbdContactKernel, PassesExactlyTheEntriesTheScalarTestsPassInScanOrder) {
 }
 
 TEST(PbdContactKernel, TiesGoToTheLowerVertexAndTheReachIsInclusive) {
-  Grid g(6);
+  ContactGrid g(6);
   const double p[3] = {0, 0, 0};
   // entry: position, travel, vertex. The query is vertex 10 with travel 1, reach² 25.
   auto put = [&](int q, double x, double y, double travel, int j) { g.x[q] = x, g.y[q] = y, g.z[q] = 0, g.travel[q] = travel, g.j[q] = j; };
@@ -93,7 +94,7 @@ TEST(PbdContactKernel, TiesGoToTheLowerVertexAndTheReachIsInclusive) {
   put(4, 3, 4.0001, 0.5, 2); // just beyond the reach
   put(5, 0, 0, 0.5, 20);     // slower, on top: passes
   const std::vector<int> b{0}, e{6};
-  EXPECT_EQ(run_kernel(g, b, e, p, 1.0, 10, 25.0), (std::vector<int>{0, 5}));
+  EXPECT_EQ(kernel_candidates(g, b, e, p, 1.0, 10, 25.0), (std::vector<int>{0, 5}));
   // an empty run and a run of one
-  EXPECT_EQ(run_kernel(g, {2, 5}, {2, 6}, p, 1.0, 10, 25.0), (std::vector<int>{5}));
+  EXPECT_EQ(kernel_candidates(g, {2, 5}, {2, 6}, p, 1.0, 10, 25.0), (std::vector<int>{5}));
 }

@@ -28,16 +28,16 @@ inline v4 load(const double* p) { return v4{p[0], p[1], p[2], p[3]}; }
 }  // namespace
 
 TBSP_STRETCH_CLONES void project_stretch_quad(const StretchQuad& q, int lanes, double k, const double* inv_mass, double* pred) {
-  v4 ax, ay, az, bx, by, bz, wa, wb;
+  v4 ax, ay, az, bx, by, bz, wa, wb, rest;
   for (int l = 0; l < 4; ++l) {
-    const int la = l < lanes ? l : 0;  // idle lanes repeat lane 0 (masked below)
+    const int la = l < lanes ? l : 0;  // idle lanes repeat lane 0 (never stored; their fields may be unset)
     const double* a = pred + 3 * std::ptrdiff_t(q.a[la]);
     const double* b = pred + 3 * std::ptrdiff_t(q.b[la]);
     ax[l] = a[0], ay[l] = a[1], az[l] = a[2];
     bx[l] = b[0], by[l] = b[1], bz[l] = b[2];
     wa[l] = inv_mass[q.a[la]], wb[l] = inv_mass[q.b[la]];
+    rest[l] = q.rest[la];
   }
-  const v4 rest{q.rest[0], q.rest[1], q.rest[2], q.rest[3]};
   const v4 dx = ax - bx, dy = ay - by, dz = az - bz;
   const v4 len = vsqrt((dx * dx + dy * dy) + dz * dz);
   const v4 w = wa + wb;
