@@ -46,6 +46,21 @@ Studio small_studio(const std::filesystem::path& dir, int ncam = 3, int nframes 
   s.ground_truth = "gt/%03d.ply";
   return s;
 }
+
+// One camera whose frames 10..13 are a 4-frame MJPG video of grey levels 0, 40, 80, 120; false
+// when OpenCV cannot write MJPG here.
+bool video_studio(const std::filesystem::path& dir, Studio& s) {
+  s = small_studio(dir, 1, 4);
+  cv::VideoWriter vw((dir / "cam0.avi").string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30, cv::Size(32, 24));
+  if (!vw.isOpened()) return false;
+  for (int f = 0; f < 4; ++f) vw.write(cv::Mat(24, 32, CV_8UC3, cv::Scalar(40 * f, 40 * f, 40 * f)));
+  vw.release();
+  s.cameras[0].images.clear();
+  s.cameras[0].video = "cam0.avi";
+  s.ground_truth.clear();
+  return true;
+}
+
 }  // namespace
 
 TEST(Studio, FramePatterns) {
@@ -126,14 +141,8 @@ TEST(Studio, StreamsFramesAndListsMissingFiles) {
 
 TEST(Studio, VideoCamerasStream) {
   const auto dir = test::temp_dir("studio_video");
-  Studio s = small_studio(dir, 1, 4);
-  cv::VideoWriter vw((dir / "cam0.avi").string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30, cv::Size(32, 24));
-  if (!vw.isOpened()) GTEST_SKIP() << "OpenCV has no MJPG writer here";
-  for (int f = 0; f < 4; ++f) vw.write(cv::Mat(24, 32, CV_8UC3, cv::Scalar(40 * f, 40 * f, 40 * f)));
-  vw.release();
-  s.cameras[0].images.clear();
-  s.cameras[0].video = "cam0.avi";
-  s.ground_truth.clear();
+  Studio s;
+  if (!video_studio(dir, s)) GTEST_SKIP() << "OpenCV has no MJPG writer here";
   write_studio(s.path, s);
   s = read_studio(s.path);
   EXPECT_TRUE(check_studio(s).ok()) << check_studio(s).summary();
@@ -151,14 +160,8 @@ TEST(Studio, VideoCamerasStream) {
 // a video studio fails with a message naming the module and the fix, and nothing else breaks.
 TEST(Studio, AMissingVideoModuleIsNamedWithTheFix) {
   const auto dir = test::temp_dir("studio_video_module");
-  Studio s = small_studio(dir, 1, 4);
-  cv::VideoWriter vw((dir / "cam0.avi").string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30, cv::Size(32, 24));
-  if (!vw.isOpened()) GTEST_SKIP() << "OpenCV has no MJPG writer here";
-  for (int f = 0; f < 4; ++f) vw.write(cv::Mat(24, 32, CV_8UC3, cv::Scalar(40 * f, 40 * f, 40 * f)));
-  vw.release();
-  s.cameras[0].images.clear();
-  s.cameras[0].video = "cam0.avi";
-  s.ground_truth.clear();
+  Studio s;
+  if (!video_studio(dir, s)) GTEST_SKIP() << "OpenCV has no MJPG writer here";
   // in a fresh process (the module is loaded once per process): the variable names a file that
   // is not there, so it is the only candidate and the stream reports it
   GTEST_FLAG_SET(death_test_style, "threadsafe");

@@ -8,49 +8,39 @@
 #include "pbd_bend_kernel.h"
 
 #include <cmath>
-#include <cstdint>
+#include <cstddef>
 
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && !defined(TBSP_NO_KERNEL_CLONES)
-#define TBSP_BEND_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
-#define TBSP_BEND_INLINE __attribute__((always_inline)) inline
-#else
-#define TBSP_BEND_CLONES
-#define TBSP_BEND_INLINE inline
-#endif
+#include "pbd_simd.h"
 
 namespace tbsp {
 namespace detail {
 
 namespace {
 
-typedef double v4 __attribute__((vector_size(32)));
-typedef std::int64_t m4 __attribute__((vector_size(32)));  // lane masks: all bits set or none
-
-TBSP_BEND_INLINE v4 splat(double x) { return v4{x, x, x, x}; }
-TBSP_BEND_INLINE v4 select(m4 m, v4 a, v4 b) { return (v4)(((m4)a & m) | ((m4)b & ~m)); }
-TBSP_BEND_INLINE v4 vsqrt(v4 x) { return v4{__builtin_sqrt(x[0]), __builtin_sqrt(x[1]), __builtin_sqrt(x[2]), __builtin_sqrt(x[3])}; }
-TBSP_BEND_INLINE v4 vabs(v4 x) { return select(x < splat(0), -x, x); }
+using namespace simd;  // v4, m4, splat, vsqrt (pbd_simd.h)
+TBSP_PBD_INLINE v4 select(m4 m, v4 a, v4 b) { return (v4)(((m4)a & m) | ((m4)b & ~m)); }
+TBSP_PBD_INLINE v4 vabs(v4 x) { return select(x < splat(0), -x, x); }
 
 struct V3 {
   v4 x, y, z;
 };
-TBSP_BEND_INLINE V3 operator-(const V3& a, const V3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-TBSP_BEND_INLINE V3 operator*(v4 s, const V3& a) { return {s * a.x, s * a.y, s * a.z}; }
-TBSP_BEND_INLINE V3 operator+(const V3& a, const V3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+TBSP_PBD_INLINE V3 operator-(const V3& a, const V3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+TBSP_PBD_INLINE V3 operator*(v4 s, const V3& a) { return {s * a.x, s * a.y, s * a.z}; }
+TBSP_PBD_INLINE V3 operator+(const V3& a, const V3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
 // Eigen's order: (x·x' + y·y') + z·z'
-TBSP_BEND_INLINE v4 dot(const V3& a, const V3& b) { return (a.x * b.x + a.y * b.y) + a.z * b.z; }
+TBSP_PBD_INLINE v4 dot(const V3& a, const V3& b) { return (a.x * b.x + a.y * b.y) + a.z * b.z; }
 // Eigen's cross3: (a1 b2 − a2 b1, a2 b0 − a0 b2, a0 b1 − a1 b0)
-TBSP_BEND_INLINE V3 cross(const V3& a, const V3& b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
+TBSP_PBD_INLINE V3 cross(const V3& a, const V3& b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
 
-TBSP_BEND_INLINE V3 gather(const double* p, const int* i) {
+TBSP_PBD_INLINE V3 gather(const double* p, const int* i) {
   const double *a = p + 3 * std::ptrdiff_t(i[0]), *b = p + 3 * std::ptrdiff_t(i[1]), *c = p + 3 * std::ptrdiff_t(i[2]),
                *d = p + 3 * std::ptrdiff_t(i[3]);
   return {v4{a[0], b[0], c[0], d[0]}, v4{a[1], b[1], c[1], d[1]}, v4{a[2], b[2], c[2], d[2]}};
 }
-TBSP_BEND_INLINE v4 gather1(const double* w, const int* i) { return v4{w[i[0]], w[i[1]], w[i[2]], w[i[3]]}; }
+TBSP_PBD_INLINE v4 gather1(const double* w, const int* i) { return v4{w[i[0]], w[i[1]], w[i[2]], w[i[3]]}; }
 
 // acos to within 7e-5 rad (Abramowitz & Stegun 4.4.45), as the scalar projection's fast_acos
-TBSP_BEND_INLINE v4 fast_acos(v4 x) {
+TBSP_PBD_INLINE v4 fast_acos(v4 x) {
   const v4 a = vabs(x);
   const v4 r = vsqrt(splat(1.0) - a) * (splat(1.5707288) + a * (splat(-0.2121144) + a * (splat(0.0742610) - splat(0.0187293) * a)));
   return select(x >= splat(0), r, splat(M_PI) - r);
@@ -58,7 +48,7 @@ TBSP_BEND_INLINE v4 fast_acos(v4 x) {
 
 }  // namespace
 
-TBSP_BEND_CLONES void project_bend_quad(const BendQuad& q, const double* inv_mass, double* pred) {
+TBSP_PBD_CLONES void project_bend_quad(const BendQuad& q, const double* inv_mass, double* pred) {
   // Bender's PBD dihedral constraint (gradients of Bridson et al. 2003): p2-p3 the edge, p0 and
   // p1 the wings; φ = acos(n1·n2), C = φ − φ_rest (eq. 10.3)
   const V3 p0 = gather(pred, q.i0), p1 = gather(pred, q.i1), p2 = gather(pred, q.i2), p3 = gather(pred, q.i3);

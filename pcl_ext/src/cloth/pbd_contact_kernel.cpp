@@ -8,22 +8,17 @@
 #include <cstdint>
 #include <cstring>
 
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && !defined(TBSP_NO_KERNEL_CLONES)
-#define TBSP_CONTACT_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
-#else
-#define TBSP_CONTACT_CLONES
-#endif
+#include "pbd_simd.h"
 
 namespace tbsp {
 namespace detail {
 
 namespace {
 
-typedef double v4 __attribute__((vector_size(32)));
-typedef std::int64_t m4 __attribute__((vector_size(32)));
+using namespace simd;  // v4, m4, splat, vsqrt (pbd_simd.h)
 typedef std::int32_t i4 __attribute__((vector_size(16)));
 
-inline v4 load4(const double* p) {
+TBSP_PBD_INLINE v4 load4(const double* p) {
   v4 v;
   std::memcpy(&v, p, sizeof v);
   return v;
@@ -31,7 +26,7 @@ inline v4 load4(const double* p) {
 
 }  // namespace
 
-TBSP_CONTACT_CLONES int contact_candidates(const ContactEntries& e, const int* begin, const int* end, int runs, const double p[3],
+TBSP_PBD_CLONES int contact_candidates(const ContactEntries& e, const int* begin, const int* end, int runs, const double p[3],
                                            double ti, int i, double reach2, int* out) {
   const v4 px{p[0], p[0], p[0], p[0]}, py{p[1], p[1], p[1], p[1]}, pz{p[2], p[2], p[2], p[2]};
   const v4 vt{ti, ti, ti, ti}, vr{reach2, reach2, reach2, reach2};

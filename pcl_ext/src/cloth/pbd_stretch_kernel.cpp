@@ -5,29 +5,21 @@
 // (-ffp-contract=off, -fno-math-errno): every lane rounds exactly as the scalar code did.
 #include "pbd_stretch_kernel.h"
 
-#include <cstdint>
+#include <cstddef>
 
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && !defined(TBSP_NO_KERNEL_CLONES)
-#define TBSP_STRETCH_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
-#else
-#define TBSP_STRETCH_CLONES
-#endif
+#include "pbd_simd.h"
 
 namespace tbsp {
 namespace detail {
 
 namespace {
 
-typedef double v4 __attribute__((vector_size(32)));
-typedef std::int64_t m4 __attribute__((vector_size(32)));
-
-inline v4 splat(double x) { return v4{x, x, x, x}; }
-inline v4 vsqrt(v4 x) { return v4{__builtin_sqrt(x[0]), __builtin_sqrt(x[1]), __builtin_sqrt(x[2]), __builtin_sqrt(x[3])}; }
-inline v4 load(const double* p) { return v4{p[0], p[1], p[2], p[3]}; }
+using namespace simd;  // v4, m4, splat, vsqrt (pbd_simd.h)
+TBSP_PBD_INLINE v4 load(const double* p) { return v4{p[0], p[1], p[2], p[3]}; }
 
 }  // namespace
 
-TBSP_STRETCH_CLONES void project_stretch_quad(const StretchQuad& q, int lanes, double k, const double* inv_mass, double* pred) {
+TBSP_PBD_CLONES void project_stretch_quad(const StretchQuad& q, int lanes, double k, const double* inv_mass, double* pred) {
   v4 ax, ay, az, bx, by, bz, wa, wb, rest;
   for (int l = 0; l < 4; ++l) {
     const int la = l < lanes ? l : 0;  // idle lanes repeat lane 0 (never stored; their fields may be unset)
@@ -56,7 +48,7 @@ TBSP_STRETCH_CLONES void project_stretch_quad(const StretchQuad& q, int lanes, d
   }
 }
 
-TBSP_STRETCH_CLONES void apply_drag_quad(const DragQuad& q, const double gravity[3], double h, double unit, double dt, double* vel) {
+TBSP_PBD_CLONES void apply_drag_quad(const DragQuad& q, const double gravity[3], double h, double unit, double dt, double* vel) {
   v4 ux, uy, uz;
   for (int l = 0; l < 4; ++l) {
     const double* u = vel + 3 * std::ptrdiff_t(q.vertex[l]);
