@@ -191,6 +191,13 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
       if ((r - rest_.row(Eigen::Index(j)).transpose()).squaredNorm() < exclude * exclude) return;
       out.emplace_back(int(std::min(i, j)), int(std::max(i, j)));
     };
+    // the kernel's tests over the runs collected in scratch; the passing entries in scan order
+    const double pp[3] = {p.x(), p.y(), p.z()};
+    auto candidates = [&](int total) {
+      if (scratch.candidates.size() < std::size_t(total) + 4) scratch.candidates.resize(std::size_t(total) + 4);
+      return detail::contact_candidates(entries, scratch.begin.data(), scratch.end.data(), int(scratch.begin.size()), pp, ti, int(i),
+                                        reach * reach, scratch.candidates.data());
+    };
     if (dense) {  // rows of the box within reach; each row's cells x0..x1 are one run of entries
       const int x0 = std::max(lo[0], clo.x()), x1 = std::min(hi[0], chi.x());
       if (x0 > x1) return;
@@ -207,22 +214,20 @@ void PbdClothSimulator::findSelfContacts(const std::vector<double>& travel) {
           total += scratch.end.back() - scratch.begin.back();
         }
       }
-      if (scratch.candidates.size() < std::size_t(total) + 4) scratch.candidates.resize(std::size_t(total) + 4);
-      const double pp[3] = {p.x(), p.y(), p.z()};
-      const int found = detail::contact_candidates(entries, scratch.begin.data(), scratch.end.data(), int(scratch.begin.size()), pp, ti,
-                                                   int(i), reach * reach, scratch.candidates.data());
+      const int found = candidates(total);
       for (int c = 0; c < found; ++c) accept(std::size_t(ej[std::size_t(scratch.candidates[std::size_t(c)])]));
       return;
     }
+    // hash: a bucket is one run; of the entries that pass, those of other cells sharing the bucket
+    // are dropped (the same entries, in the same order, as testing the cell first)
     auto visit = [&](const Eigen::Vector3i& cc) {
       const std::size_t h = hash(cc);
-      for (std::size_t q = std::size_t(start[h]); q < std::size_t(start[h + 1]); ++q) {
-        if (ecell[q] != cc) continue;
-        const std::size_t j = std::size_t(ej[q]);
-        if (etravel[q] > ti || (etravel[q] == ti && j >= i)) continue;  // found from j (or j is i)
-        const double dx = p.x() - ex[q], dy = p.y() - ey[q], dz = p.z() - ez[q];
-        if ((dx * dx + dy * dy) + dz * dz > reach * reach) continue;
-        accept(j);
+      scratch.begin.assign(1, start[h]);
+      scratch.end.assign(1, start[h + 1]);
+      const int found = candidates(start[h + 1] - start[h]);
+      for (int c = 0; c < found; ++c) {
+        const std::size_t q = std::size_t(scratch.candidates[std::size_t(c)]);
+        if (ecell[q] == cc) accept(std::size_t(ej[q]));
       }
     };
     for (int x = lo[0]; x <= hi[0]; ++x) {
