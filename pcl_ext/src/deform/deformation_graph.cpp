@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/SparseCore>
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <limits>
 #include <queue>
@@ -68,63 +69,98 @@ void DeformationGraph::build(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
   // per vertex its k + 1 nearest nodes along the surface: one Dijkstra from all nodes at once
   // that keeps up to k + 1 labels (node, distance) per vertex, settled in order of distance
   // (ties by vertex, then node: deterministic). O((k + 1)(#V + #E) log) for any node count.
-  const std::vector<std::vector<int>> adj = vertex_adjacency(F, V.rows());
+  // Flat arrays (adjacency, labels, queued bests) instead of a vector per vertex: the same
+  // labels, without the allocations and pointer chasing.
+  const Eigen::Index nv = V.rows();
+  std::vector<int> adj_start(std::size_t(nv) + 1, 0), adj_list;
+  {
+    const std::vector<std::vector<int>> adj = vertex_adjacency(F, nv);
+    for (Eigen::Index v = 0; v < nv; ++v) adj_start[std::size_t(v) + 1] = adj_start[std::size_t(v)] + int(adj[std::size_t(v)].size());
+    adj_list.reserve(std::size_t(adj_start.back()));
+    for (const auto& a : adj) adj_list.insert(adj_list.end(), a.begin(), a.end());
+  }
   const int K = k_ + 1;
-  std::vector<std::vector<std::pair<double, int>>> near(static_cast<std::size_t>(V.rows()));
+  std::vector<std::pair<double, int>> near(std::size_t(nv) * std::size_t(K));  // (distance, node), K per vertex
+  std::vector<int> n_near(std::size_t(nv), 0);
   {
     using Item = std::tuple<double, int, int>;  // distance, vertex, node
     std::priority_queue<Item, std::vector<Item>, std::greater<Item>> q;
     // per vertex the best distance queued so far for each node reaching it: an item no shorter
     // than one already queued for the same (vertex, node) would pop later and be skipped, so it
-    // is not queued (the same labels, fewer heap operations)
-    std::vector<std::vector<std::pair<int, double>>> queued(static_cast<std::size_t>(V.rows()));
+    // is not queued (the same labels, fewer heap operations). kInline per vertex in a flat
+    // array, more in a per-vertex overflow list (rare).
+    constexpr int kInline = 8;
+    std::vector<std::pair<int, double>> queued(std::size_t(nv) * kInline);
+    std::vector<unsigned char> n_queued(std::size_t(nv), 0);
+    std::vector<std::vector<std::pair<int, double>>> overflow;
+    std::vector<int> overflow_of;  // vertex -> index in overflow, −1 none (allocated on first use)
     for (int j = 0; j < n; ++j) q.push({0.0, node_vertex_[std::size_t(j)], j});
     auto settled = [&](int v, int j) {
-      for (const auto& [d, l] : near[std::size_t(v)])
-        if (l == j) return true;
+      const std::pair<double, int>* l = &near[std::size_t(v) * std::size_t(K)];
+      for (int m = 0; m < n_near[std::size_t(v)]; ++m)
+        if (l[m].second == j) return true;
       return false;
     };
     auto improves = [&](int w, int j, double d) {
-      for (auto& [l, best] : queued[std::size_t(w)])
-        if (l == j) {
-          if (d >= best) return false;
-          best = d;
-          return true;
-        }
-      queued[std::size_t(w)].push_back({j, d});
+      auto update = [&](std::pair<int, double>& e) {
+        if (d >= e.second) return false;
+        e.second = d;
+        return true;
+      };
+      std::pair<int, double>* l = &queued[std::size_t(w) * kInline];
+      const int m = n_queued[std::size_t(w)];
+      for (int i = 0; i < m; ++i)
+        if (l[i].first == j) return update(l[i]);
+      if (m < kInline) {
+        l[m] = {j, d};
+        n_queued[std::size_t(w)] = static_cast<unsigned char>(m + 1);
+        return true;
+      }
+      if (overflow_of.empty()) overflow_of.assign(std::size_t(nv), -1);
+      int& o = overflow_of[std::size_t(w)];
+      if (o < 0) {
+        o = int(overflow.size());
+        overflow.emplace_back();
+      }
+      for (auto& e : overflow[std::size_t(o)])
+        if (e.first == j) return update(e);
+      overflow[std::size_t(o)].push_back({j, d});
       return true;
     };
     while (!q.empty()) {
       const auto [d, v, j] = q.top();
       q.pop();
-      auto& lv = near[std::size_t(v)];
-      if (int(lv.size()) >= K || settled(v, j)) continue;
-      lv.push_back({d, j});
-      if (int(lv.size()) == K) std::vector<std::pair<int, double>>().swap(queued[std::size_t(v)]);
-      for (int w : adj[std::size_t(v)]) {
-        if (int(near[std::size_t(w)].size()) >= K || settled(w, j)) continue;
-        const double dw = d + (V.row(v) - V.row(w)).norm();
+      int& nl = n_near[std::size_t(v)];
+      if (nl >= K || settled(v, j)) continue;
+      near[std::size_t(v) * std::size_t(K) + std::size_t(nl)] = {d, j};
+      ++nl;
+      const Eigen::RowVector3d pv = V.row(v);
+      for (int a = adj_start[std::size_t(v)]; a < adj_start[std::size_t(v) + 1]; ++a) {
+        const int w = adj_list[std::size_t(a)];
+        if (n_near[std::size_t(w)] >= K || settled(w, j)) continue;
+        const double dw = d + (pv - V.row(w)).norm();
         if (improves(w, j, dw)) q.push({dw, w, j});
       }
     }
   }
-  bind_.resize(V.rows(), k_);
-  weight_.resize(V.rows(), k_);
+  bind_.resize(nv, k_);
+  weight_.resize(nv, k_);
   std::vector<Eigen::Index> idx;
   std::vector<double> d2;
-  for (Eigen::Index v = 0; v < V.rows(); ++v) {
-    auto& c = near[std::size_t(v)];
-    if (c.empty()) {  // a component without a node (more components than nodes): Euclidean nearest
+  for (Eigen::Index v = 0; v < nv; ++v) {
+    std::pair<double, int>* c = &near[std::size_t(v) * std::size_t(K)];
+    int nc = n_near[std::size_t(v)];
+    if (nc == 0) {  // a component without a node (more components than nodes): Euclidean nearest
       node_tree.knn(V.row(v).transpose(), std::min(k_ + 1, n), idx, d2);
-      for (std::size_t m = 0; m < idx.size(); ++m) c.push_back({std::sqrt(d2[m]), int(idx[m])});
+      for (std::size_t m = 0; m < idx.size() && nc < K; ++m) c[nc++] = {std::sqrt(d2[m]), int(idx[m])};
     }
-    std::sort(c.begin(), c.end());
-    const double dmax = int(c.size()) > k_ ? c[std::size_t(k_)].first : c.back().first * 1.5 + 1e-12;
+    std::sort(c, c + nc);
+    const double dmax = nc > k_ ? c[k_].first : c[nc - 1].first * 1.5 + 1e-12;
     double sum = 0;
     for (int m = 0; m < k_; ++m) {
-      const bool have = m < int(c.size());
-      const double w = have ? std::pow(std::max(0.0, 1.0 - c[std::size_t(m)].first / std::max(dmax, 1e-300)), 2) : 0.0;
-      bind_(v, m) = have ? c[std::size_t(m)].second : c[0].second;
+      const bool have = m < nc;
+      const double w = have ? std::pow(std::max(0.0, 1.0 - c[m].first / std::max(dmax, 1e-300)), 2) : 0.0;
+      bind_(v, m) = have ? c[m].second : c[0].second;
       weight_(v, m) = w;
       sum += w;
     }
@@ -153,6 +189,9 @@ void DeformationGraph::build(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
   for (int j = 0; j < n; ++j) start_[std::size_t(j) + 1] = start_[std::size_t(j)] + nb_[std::size_t(j)].size();
   factor_ = Factor();
   reset();
+  { unsigned long long h = 1469598103934665603ULL; auto mix = [&](const void* p, size_t n) { for (size_t i = 0; i < n; ++i) { h ^= ((const unsigned char*)p)[i]; h *= 1099511628211ULL; } };
+    mix(bind_.data(), sizeof(int) * bind_.size()); mix(weight_.data(), sizeof(double) * weight_.size()); for (auto& e : edges_) mix(&e, sizeof(e));
+    fprintf(stderr, "TMPHASH %016llx\n", h); }
 }
 
 void DeformationGraph::reset() {

@@ -79,9 +79,10 @@ MeshReport validate_mesh(const TriMesh& mesh) {
   const double diag = bbox_diagonal(V);
   const double area_eps = 1e-14 * diag * diag;
   std::vector<char> referenced(std::size_t(V.rows()), 0);
-  std::vector<std::array<int, 3>> sorted_faces;
-  sorted_faces.reserve(good.size());
-  std::map<std::array<int, 3>, Eigen::Index> seen;
+  // (sorted corners, face): sorted afterwards, every face after the first of an equal-corner
+  // group is a duplicate (a sort instead of a map: 86k faces 4 × faster)
+  std::vector<std::pair<std::array<int, 3>, Eigen::Index>> keyed;
+  keyed.reserve(good.size());
   // directed half-edges (a,b) -> count; undirected -> count
   std::vector<std::pair<std::pair<int, int>, int>> half;  // ((min,max), +1 if a<b else -1)
   half.reserve(good.size() * 3);
@@ -96,7 +97,7 @@ MeshReport validate_mesh(const TriMesh& mesh) {
     if (degenerate) r.degenerate_faces.push_back(f);
     std::array<int, 3> key{a, b, c};
     std::sort(key.begin(), key.end());
-    if (!seen.emplace(key, f).second) r.duplicate_faces.push_back(f);
+    keyed.push_back({key, f});
     for (int k = 0; k < 3; ++k) {
       int u = F(f, k), v = F(f, (k + 1) % 3);
       if (u == v) continue;
@@ -105,23 +106,41 @@ MeshReport validate_mesh(const TriMesh& mesh) {
   }
   for (Eigen::Index i = 0; i < V.rows(); ++i)
     if (!referenced[std::size_t(i)]) r.isolated_vertices.push_back(i);
+  std::sort(keyed.begin(), keyed.end());
+  for (std::size_t i = 1; i < keyed.size(); ++i)
+    if (keyed[i].first == keyed[i - 1].first) r.duplicate_faces.push_back(keyed[i].second);
+  std::sort(r.duplicate_faces.begin(), r.duplicate_faces.end());  // in face order, as found
 
-  std::sort(half.begin(), half.end());
+  // group the half-edges by undirected edge: bucketed by the smaller vertex (counting sort),
+  // each bucket sorted by the larger one; edges are visited in (min, max) order
+  std::vector<int> bucket_start(std::size_t(V.rows()) + 1, 0);
+  for (const auto& h : half) ++bucket_start[std::size_t(h.first.first) + 1];
+  for (std::size_t v = 0; v + 1 < bucket_start.size(); ++v) bucket_start[v + 1] += bucket_start[v];
+  std::vector<std::pair<int, int>> by_min(half.size());  // (max, sign)
+  {
+    std::vector<int> fill(bucket_start.begin(), bucket_start.end() - 1);
+    for (const auto& h : half) by_min[std::size_t(fill[std::size_t(h.first.first)]++)] = {h.first.second, h.second};
+  }
   Eigen::Index num_edges = 0;
   std::vector<std::pair<int, int>> boundary;
-  for (std::size_t i = 0; i < half.size();) {
-    std::size_t j = i;
-    int fwd = 0, bwd = 0;
-    while (j < half.size() && half[j].first == half[i].first) {
-      (half[j].second > 0 ? fwd : bwd)++;
-      ++j;
+  for (int a = 0; a + 1 < int(bucket_start.size()); ++a) {
+    const auto first = by_min.begin() + bucket_start[std::size_t(a)], last = by_min.begin() + bucket_start[std::size_t(a) + 1];
+    std::sort(first, last);
+    for (auto i = first; i != last;) {
+      auto j = i;
+      int fwd = 0, bwd = 0;
+      while (j != last && j->first == i->first) {
+        (j->second > 0 ? fwd : bwd)++;
+        ++j;
+      }
+      ++num_edges;
+      const int n = fwd + bwd;
+      const std::pair<int, int> e{a, i->first};
+      if (n == 1) boundary.push_back(e);
+      if (n > 2) r.nonmanifold_edges.push_back(e);
+      if (n == 2 && (fwd == 2 || bwd == 2)) r.inconsistent_edges.push_back(e);
+      i = j;
     }
-    ++num_edges;
-    const int n = fwd + bwd;
-    if (n == 1) boundary.push_back(half[i].first);
-    if (n > 2) r.nonmanifold_edges.push_back(half[i].first);
-    if (n == 2 && (fwd == 2 || bwd == 2)) r.inconsistent_edges.push_back(half[i].first);
-    i = j;
   }
   r.boundary_edges = Eigen::Index(boundary.size());
   // Boundary loops: components of the boundary-edge graph.
