@@ -1,6 +1,7 @@
 #include "tbsp/deform/laplacian_deformer.h"
 
 #include "laplacian_deformer_cache.h"
+#include "../solve/sparse_gram.h"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -354,21 +355,24 @@ void LaplacianDeformer::buildSystem() {
   // L̂ restricted to the free columns and LᵀL: the expensive part, reused while the free set
   // (hard + isolated vertices) is unchanged, e.g. when only soft constraints or weights change
   if (c.nl_free_index != c.free_index) {
-    std::vector<Eigen::Triplet<double>> t;
-    t.reserve(std::size_t(L_.nonZeros()));
-    for (int col = 0; col < L_.outerSize(); ++col)
-      for (Eigen::SparseMatrix<double>::InnerIterator it(L_, col); it; ++it) {
-        const int fc = c.free_index[std::size_t(it.col())];
-        if (fc >= 0) t.emplace_back(int(it.row()), fc, it.value());
-      }
+    // the free columns keep their order (free indices increase with the vertex): copied whole
+    Eigen::Index nnz = 0;
+    for (Eigen::Index col = 0; col < n; ++col)
+      if (c.free_index[std::size_t(col)] >= 0) nnz += L_.outerIndexPtr()[col + 1] - L_.outerIndexPtr()[col];
     c.L_free.resize(n, nf);
-    c.L_free.setFromTriplets(t.begin(), t.end());
-    c.NL = Eigen::SparseMatrix<double>(c.L_free.transpose() * c.L_free);
-    // sorted inner indices (the in-place assembly below binary-searches them): a transposed
-    // copy is written in order
-    const Eigen::SparseMatrix<double, Eigen::RowMajor> sorted = c.NL;
-    c.NL = sorted;
-    c.NL.makeCompressed();
+    c.L_free.resizeNonZeros(nnz);
+    c.L_free.outerIndexPtr()[0] = 0;
+    for (Eigen::Index col = 0, at = 0; col < n; ++col) {
+      const int fc = c.free_index[std::size_t(col)];
+      if (fc < 0) continue;
+      const int b = L_.outerIndexPtr()[col], e = L_.outerIndexPtr()[col + 1];
+      std::copy(L_.innerIndexPtr() + b, L_.innerIndexPtr() + e, c.L_free.innerIndexPtr() + at);
+      std::copy(L_.valuePtr() + b, L_.valuePtr() + e, c.L_free.valuePtr() + at);
+      at += e - b;
+      c.L_free.outerIndexPtr()[fc + 1] = int(at);
+    }
+    // sorted inner indices: the in-place assembly below binary-searches them
+    c.NL = detail::gram_sorted(c.L_free);
     c.nl_free_index = c.free_index;
     c.N_work.resize(0, 0);
   }
