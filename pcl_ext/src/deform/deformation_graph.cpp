@@ -323,10 +323,14 @@ double DeformationGraph::solve(const std::vector<GraphConstraint>& constraints, 
         JW[m] = J[m].transpose() * W[i];
         gvec[std::size_t(j)] += J[m].transpose() * e[i];
       }
-      // a binding of weight 0 contributes nothing, and its node pair need not be an edge
+      // a binding of weight 0 contributes nothing, and its node pair need not be an edge; only
+      // the blocks (p, q) with q >= p are read below (the lower triangle), so the transposed
+      // ones are not summed
       for (int a = 0; a < k_; ++a)
-        for (int b = 0; b < k_; ++b)
-          if (weight_(v, a) > 0 && weight_(v, b) > 0) H[slot(bind_(v, a), bind_(v, b))] += JW[a] * J[b];
+        for (int b = 0; b < k_; ++b) {
+          const int p = bind_(v, a), q = bind_(v, b);
+          if (q >= p && weight_(v, a) > 0 && weight_(v, b) > 0) H[slot(p, q)] += JW[a] * J[b];
+        }
     }
     // regulariser, both directions of every edge
     for (const auto& [a0, b0] : edges_)
@@ -343,8 +347,8 @@ double DeformationGraph::solve(const std::vector<GraphConstraint>& constraints, 
         gvec[std::size_t(l)] += alpha * Jl.transpose() * r;
         H[slot(j, j)] += alpha * Jj.transpose() * Jj;
         H[slot(l, l)] += alpha * Jl.transpose() * Jl;
-        H[slot(j, l)] += alpha * Jj.transpose() * Jl;
-        H[slot(l, j)] += alpha * Jl.transpose() * Jj;
+        if (l >= j) H[slot(j, l)] += alpha * Jj.transpose() * Jl;  // (the transposed block is not read)
+        else H[slot(l, j)] += alpha * Jl.transpose() * Jj;
       }
     // Levenberg damping relative to the mean diagonal (keeps nodes with nothing but the
     // regulariser's relative terms, e.g. a part without data, from a singular system)
