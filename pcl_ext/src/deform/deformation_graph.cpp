@@ -12,6 +12,7 @@
 #include <tuple>
 #include <string>
 
+#include "../mesh/dary_heap.h"
 #include "tbsp/core/error.h"
 #include "tbsp/deform/rotations.h"
 #include "tbsp/mesh/point_search.h"
@@ -84,7 +85,7 @@ void DeformationGraph::build(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
   std::vector<int> n_near(std::size_t(nv), 0);
   {
     using Item = std::tuple<double, int, int>;  // distance, vertex, node
-    std::priority_queue<Item, std::vector<Item>, std::greater<Item>> q;
+    detail::DaryMinHeap<Item> q;
     // per vertex the best distance queued so far for each node reaching it: an item no shorter
     // than one already queued for the same (vertex, node) would pop later and be skipped, so it
     // is not queued (the same labels, fewer heap operations). kInline per vertex in a flat

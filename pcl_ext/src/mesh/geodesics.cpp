@@ -8,6 +8,7 @@
 #include <set>
 #include <string>
 
+#include "dary_heap.h"
 #include "tbsp/core/error.h"
 #include "tbsp/mesh/topology.h"
 
@@ -19,7 +20,7 @@ Eigen::VectorXd dijkstra_distances(const Eigen::MatrixX3d& V, const std::vector<
   const double inf = std::numeric_limits<double>::infinity();
   Eigen::VectorXd d = Eigen::VectorXd::Constant(n, inf);
   using Item = std::pair<double, int>;
-  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+  detail::DaryMinHeap<Item> heap;
   for (int s : sources) {
     if (s < 0 || s >= n)
       throw InvalidInput("[tbsp::dijkstra_distances] source vertex " + std::to_string(s) + " is out of range (mesh has " +
@@ -70,7 +71,7 @@ std::vector<double> dijkstra_to_targets(const EdgeGraph& g, int source, const st
   std::vector<double> d(n, inf);
   if (predecessor) predecessor->assign(n, -1);
   using Item = std::pair<double, int>;
-  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+  detail::DaryMinHeap<Item> heap;
   d[static_cast<std::size_t>(source)] = 0;
   heap.emplace(0.0, source);
   std::size_t left = targets.size();
