@@ -5,10 +5,8 @@
 #include <Eigen/Geometry>
 #include <Eigen/SparseCore>
 #include <algorithm>
-#include <cstdio>
 #include <cmath>
 #include <limits>
-#include <queue>
 #include <tuple>
 #include <string>
 
@@ -190,9 +188,6 @@ void DeformationGraph::build(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
   for (int j = 0; j < n; ++j) start_[std::size_t(j) + 1] = start_[std::size_t(j)] + nb_[std::size_t(j)].size();
   factor_ = Factor();
   reset();
-  { unsigned long long h = 1469598103934665603ULL; auto mix = [&](const void* p, size_t n) { for (size_t i = 0; i < n; ++i) { h ^= ((const unsigned char*)p)[i]; h *= 1099511628211ULL; } };
-    mix(bind_.data(), sizeof(int) * bind_.size()); mix(weight_.data(), sizeof(double) * weight_.size()); for (auto& e : edges_) mix(&e, sizeof(e));
-    fprintf(stderr, "TMPHASH %016llx\n", h); }
 }
 
 void DeformationGraph::reset() {

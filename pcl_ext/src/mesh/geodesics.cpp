@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <atomic>
 #include <limits>
-#include <queue>
 #include <cmath>
 #include <set>
 #include <string>
