@@ -3,11 +3,16 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <algorithm>
 #include <limits>
+#include <set>
+#include <vector>
 
 #include "tbsp/core/error.h"
 #include "tbsp/deform/deformation_graph.h"
+#include "tbsp/mesh/geodesics.h"
 #include "tbsp/mesh/primitives.h"
+#include "tbsp/mesh/topology.h"
 
 using namespace tbsp;
 
@@ -130,4 +135,34 @@ TEST(DeformationGraph, DeterministicAndBadInputIsAClearError) {
   copy.solve(c, 0.1);
   g.solve(c, 0.1);
   EXPECT_EQ((g.deform() - copy.deform()).cwiseAbs().maxCoeff(), 0.0);
+}
+
+// The graph's edges come from the bindings: nodes that share a vertex among its k nearest along
+// the surface (weight > 0: nearer than its (k+1)-th). Checked against a plain Dijkstra from each
+// node on a jittered grid (distinct distances), with few nodes and with more nodes than the
+// search keeps queued per vertex in place (its overflow lists).
+TEST(DeformationGraph, EdgesJoinNodesSharingAVertexAmongItsKNearestAlongTheSurface) {
+  const TriMesh m = make_grid(30, 30, 1.0, 1.0, 0.3, 5);
+  const std::vector<std::vector<int>> adj = vertex_adjacency(m.F, m.V.rows());
+  for (int nodes : {25, 500}) {
+    DeformationGraph g;
+    g.build(m.V, m.F, nodes, 4);
+    const int n = g.nodeCount();
+    std::vector<Eigen::VectorXd> dist;  // per node, to every vertex
+    for (int j = 0; j < n; ++j) dist.push_back(dijkstra_distances(m.V, adj, {g.nodeVertices()[std::size_t(j)]}));
+    std::set<std::pair<int, int>> expected;
+    for (Eigen::Index v = 0; v < m.V.rows(); ++v) {
+      std::vector<std::pair<double, int>> c;
+      for (int j = 0; j < n; ++j) c.push_back({dist[std::size_t(j)](v), j});
+      std::sort(c.begin(), c.end());
+      const double dk = c[4].first;  // the (k+1)-th
+      for (int a = 0; a < 4; ++a)
+        for (int b = a + 1; b < 4; ++b)
+          if (c[std::size_t(a)].first < dk && c[std::size_t(b)].first < dk)
+            expected.insert({std::min(c[std::size_t(a)].second, c[std::size_t(b)].second),
+                             std::max(c[std::size_t(a)].second, c[std::size_t(b)].second)});
+    }
+    const std::set<std::pair<int, int>> got(g.edges().begin(), g.edges().end());
+    EXPECT_EQ(got, expected) << nodes << " nodes";
+  }
 }
