@@ -32,7 +32,7 @@ Eigen::SparseMatrix<double> gram_sorted(const Eigen::SparseMatrix<double>& A_in)
       std::vector<double>& bv = block_value[std::size_t(b)];
       for (int j = b * kBlock; j < std::min(n, (b + 1) * kBlock); ++j) {
         touched.clear();
-        for (Eigen::SparseMatrix<double>::InnerIterator it(A, j); it; ++it) {  // k increasing
+        for (Eigen::SparseMatrix<double>::InnerIterator it(A, j); it; ++it) {  // stored order
           const double akj = it.value();
           for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator r(R, it.row()); r; ++r) {
             const int i = int(r.col());

@@ -15,8 +15,8 @@ namespace detail {
 
 /// \brief AᵀA (cols × cols), compressed, inner indices sorted in every column.
 ///
-/// Entry (i, j) is Σ_k A(k,i)·A(k,j) summed over k in increasing order: the result is the same
-/// bits on every run and thread count. Exact zeros from cancellation are kept as stored
+/// Entry (i, j) is Σ_k A(k,i)·A(k,j) summed over k in the order of column j's stored entries
+/// (increasing k when A's inner indices are sorted): the same bits on every run and thread count. Exact zeros from cancellation are kept as stored
 /// entries (the pattern is the structural one). Complexity O(Σ_k nnz(row k)²) time, O(cols)
 /// extra memory. Blocks of columns are computed on the OpenMP threads into separate buffers.
 Eigen::SparseMatrix<double> gram_sorted(const Eigen::SparseMatrix<double>& A);
