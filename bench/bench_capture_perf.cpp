@@ -49,8 +49,6 @@
 #include <Eigen/SVD>
 
 #include "bench_util.h"
-#include "tbsp/core/heap.h"
-#include "tbsp/core/huge_pages.h"
 
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/mesh/trajectory_smoother.h"
@@ -435,11 +433,7 @@ void stereo_rows(int frames, int size) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  // the heap as the tbsp CLI sets it up (compare with TBSP_NO_HUGE_PAGES=1 / TBSP_DEFAULT_MALLOC=1)
-  tbsp::reexec_with_huge_pages(argv);
-  const bool kept = tbsp::keep_freed_memory();
-  std::printf("heap: huge pages %s, freed memory kept for re-use %s\n", std::getenv("GLIBC_TUNABLES") ? std::getenv("GLIBC_TUNABLES") : "(not asked for)",
-              kept ? "yes" : "no (TBSP_DEFAULT_MALLOC)");
+  tbsp::bench::heap_as_the_cli(argv);  // as the tbsp CLI (bench_util.h)
   int repeats = 3, capture_frames = 10, capture_size = 1004, vlasic = 0, stereo = 0, hull = 0;
   bool capture_only = false;
   InBetween vlasic_mode = InBetween::linear;

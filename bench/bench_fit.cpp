@@ -33,8 +33,7 @@
 #include <string>
 #include <vector>
 
-#include "tbsp/core/heap.h"
-#include "tbsp/core/huge_pages.h"
+#include "bench_util.h"
 #include "tbsp/deform/deformation_graph.h"
 #include <Eigen/Geometry>
 #include "tbsp/plugins/synthetic_scan.h"
@@ -117,12 +116,7 @@ double median_of(std::vector<FitReport> r, double FitReport::*field) {
 }
 
 int main(int argc, char** argv) {
-  // the heap as the tbsp CLI sets it up (compare with TBSP_NO_HUGE_PAGES=1 / TBSP_DEFAULT_MALLOC=1)
-  tbsp::reexec_with_huge_pages(argv);  // tbsp/core/huge_pages.h
-  const bool kept = tbsp::keep_freed_memory();  // tbsp/core/heap.h
-  std::printf("heap: huge pages %s, freed memory kept for re-use %s\n",
-              std::getenv("GLIBC_TUNABLES") ? std::getenv("GLIBC_TUNABLES") : "(not asked for)",
-              kept ? "yes" : "no (TBSP_DEFAULT_MALLOC)");
+  tbsp::bench::heap_as_the_cli(argv);  // as the tbsp CLI (bench_util.h)
   bool poisson = true, detail_row = true;
   int repeat = 3;
   std::string only;

@@ -15,14 +15,8 @@ namespace detail {
 
 namespace {
 
-using namespace simd;  // v4, m4, splat, vsqrt (pbd_simd.h)
+using namespace simd;  // v4, m4, splat, load4, vsqrt (pbd_simd.h)
 typedef std::int32_t i4 __attribute__((vector_size(16)));
-
-TBSP_PBD_INLINE v4 load4(const double* p) {
-  v4 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
 
 }  // namespace
 

@@ -14,8 +14,7 @@ namespace detail {
 
 namespace {
 
-using namespace simd;  // v4, m4, splat, vsqrt (pbd_simd.h)
-TBSP_PBD_INLINE v4 load(const double* p) { return v4{p[0], p[1], p[2], p[3]}; }
+using namespace simd;  // v4, m4, splat, load4, vsqrt (pbd_simd.h)
 
 }  // namespace
 
@@ -54,7 +53,7 @@ TBSP_PBD_CLONES void apply_drag_quad(const DragQuad& q, const double gravity[3],
     const double* u = vel + 3 * std::ptrdiff_t(q.vertex[l]);
     ux[l] = u[0], uy[l] = u[1], uz[l] = u[2];
   }
-  const v4 nx = load(q.nx), ny = load(q.ny), nz = load(q.nz);
+  const v4 nx = load4(q.nx), ny = load4(q.ny), nz = load4(q.nz);
   const v4 len = vsqrt((nx * nx + ny * ny) + nz * nz);
   const m4 drag = (len > splat(0)) & (splat(h) > splat(0));
   const v4 nnx = nx / len, nny = ny / len, nnz = nz / len;
@@ -62,7 +61,7 @@ TBSP_PBD_CLONES void apply_drag_quad(const DragQuad& q, const double gravity[3],
   const v4 unx = dot * nnx, uny = dot * nny, unz = dot * nnz;
   const v4 utx = ux - unx, uty = uy - uny, utz = uz - unz;
   const v4 un_len = vsqrt((unx * unx + uny * uny) + unz * unz);
-  const v4 a = (load(q.d_n) * un_len) / splat(unit), dt_ = load(q.d_t), c = splat(0.5 * h);
+  const v4 a = (load4(q.d_n) * un_len) / splat(unit), dt_ = load4(q.d_t), c = splat(0.5 * h);
   const v4 gx = splat(gravity[0]), gy = splat(gravity[1]), gz = splat(gravity[2]);
   const v4 dragx = gx - c * (a * unx + dt_ * utx), dragy = gy - c * (a * uny + dt_ * uty), dragz = gz - c * (a * unz + dt_ * utz);
   for (int l = 0; l < 4; ++l) {

@@ -71,13 +71,8 @@ void DeformationGraph::build(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
   // Flat arrays (adjacency, labels, queued bests) instead of a vector per vertex: the same
   // labels, without the allocations and pointer chasing.
   const Eigen::Index nv = V.rows();
-  std::vector<int> adj_start(std::size_t(nv) + 1, 0), adj_list;
-  {
-    const std::vector<std::vector<int>> adj = vertex_adjacency(F, nv);
-    for (Eigen::Index v = 0; v < nv; ++v) adj_start[std::size_t(v) + 1] = adj_start[std::size_t(v)] + int(adj[std::size_t(v)].size());
-    adj_list.reserve(std::size_t(adj_start.back()));
-    for (const auto& a : adj) adj_list.insert(adj_list.end(), a.begin(), a.end());
-  }
+  std::vector<int> adj_start, adj_list;
+  vertex_adjacency_compressed(F, nv, adj_start, adj_list);
   const int K = k_ + 1;
   std::vector<std::pair<double, int>> near(std::size_t(nv) * std::size_t(K));  // (distance, node), K per vertex
   std::vector<int> n_near(std::size_t(nv), 0);

@@ -48,17 +48,11 @@ namespace {
 struct EdgeGraph {
   std::vector<int> start, to;
   std::vector<double> length;
-  EdgeGraph(const Eigen::MatrixX3d& V, const std::vector<std::vector<int>>& adjacency) {
-    start.assign(adjacency.size() + 1, 0);
-    for (std::size_t u = 0; u < adjacency.size(); ++u) start[u + 1] = start[u] + int(adjacency[u].size());
-    to.resize(std::size_t(start.back()));
-    length.resize(std::size_t(start.back()));
-    for (std::size_t u = 0; u < adjacency.size(); ++u)
-      for (std::size_t k = 0; k < adjacency[u].size(); ++k) {
-        const int v = adjacency[u][k];
-        to[std::size_t(start[u]) + k] = v;
-        length[std::size_t(start[u]) + k] = (V.row(Eigen::Index(u)) - V.row(v)).norm();
-      }
+  EdgeGraph(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
+    vertex_adjacency_compressed(F, V.rows(), start, to);
+    length.resize(to.size());
+    for (std::size_t u = 0; u + 1 < start.size(); ++u)
+      for (int e = start[u]; e < start[u + 1]; ++e) length[std::size_t(e)] = (V.row(Eigen::Index(u)) - V.row(to[std::size_t(e)])).norm();
   }
 };
 
@@ -114,7 +108,7 @@ std::vector<int> target_slots(Eigen::Index n, const std::vector<int>& vertices, 
 
 Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                                          const std::vector<int>& vertices, const ProgressCallback& progress) {
-  const EdgeGraph graph(V, vertex_adjacency(F, V.rows()));
+  const EdgeGraph graph(V, F);
   const int k = int(vertices.size());
   Eigen::MatrixXd D(k, k);
   std::vector<int> slot = target_slots(V.rows(), vertices, "geodesic_distance_matrix");
@@ -137,7 +131,7 @@ Eigen::MatrixXd geodesic_distance_matrix(const Eigen::MatrixX3d& V, const Eigen:
 
 std::vector<std::vector<std::vector<int>>> geodesic_paths(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                                                          const std::vector<int>& vertices) {
-  const EdgeGraph graph(V, vertex_adjacency(F, V.rows()));
+  const EdgeGraph graph(V, F);
   const int k = int(vertices.size());
   std::vector<int> slot = target_slots(V.rows(), vertices, "geodesic_paths");
   std::vector<std::vector<std::vector<int>>> paths(static_cast<std::size_t>(k));

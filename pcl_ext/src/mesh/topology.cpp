@@ -37,6 +37,16 @@ std::vector<std::vector<int>> vertex_adjacency(const Eigen::MatrixX3i& F, Eigen:
   return adj;
 }
 
+void vertex_adjacency_compressed(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, std::vector<int>& offsets,
+                                 std::vector<int>& neighbours) {
+  const std::vector<std::vector<int>> adj = vertex_adjacency(F, num_vertices);
+  offsets.assign(adj.size() + 1, 0);
+  for (std::size_t v = 0; v < adj.size(); ++v) offsets[v + 1] = offsets[v] + int(adj[v].size());
+  neighbours.clear();
+  neighbours.reserve(std::size_t(offsets.back()));
+  for (const auto& a : adj) neighbours.insert(neighbours.end(), a.begin(), a.end());
+}
+
 void vertex_faces(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, std::vector<int>& offsets, std::vector<int>& faces) {
   offsets.assign(std::size_t(num_vertices) + 1, 0);
   for (Eigen::Index f = 0; f < F.rows(); ++f)

@@ -13,6 +13,11 @@ Eigen::MatrixX2i unique_edges(const Eigen::MatrixX3i& F);
 /// Per-vertex sorted neighbour lists (one-ring over faces). O(#F log #F).
 std::vector<std::vector<int>> vertex_adjacency(const Eigen::MatrixX3i& F, Eigen::Index num_vertices);
 
+/// vertex_adjacency compressed: vertex v's neighbours are neighbours[offsets[v] .. offsets[v+1]),
+/// ascending (the same lists). O(#F log #F).
+void vertex_adjacency_compressed(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, std::vector<int>& offsets,
+                                 std::vector<int>& neighbours);
+
 /// Faces around each vertex, compressed: vertex v's faces are faces[offsets[v] .. offsets[v+1])
 /// in ascending face index (a face listing a vertex twice appears twice). O(#F + #V).
 void vertex_faces(const Eigen::MatrixX3i& F, Eigen::Index num_vertices, std::vector<int>& offsets, std::vector<int>& faces);
