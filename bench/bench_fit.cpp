@@ -34,6 +34,7 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "tbsp/core/logging.h"
 #include "tbsp/deform/deformation_graph.h"
 #include <Eigen/Geometry>
 #include "tbsp/plugins/synthetic_scan.h"
@@ -135,6 +136,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--no-poisson") poisson = false;
+    else if (a == "-v" || a == "--verbose") tbsp::logger()->set_level(spdlog::level::trace);  // the fitter's per-iteration log
     else if (a == "--no-detail-row") detail_row = false;
     else if (a == "--repeat" && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
     else if (a == "--only" && i + 1 < argc) only = argv[++i];
@@ -168,7 +170,7 @@ int main(int argc, char** argv) {
         if (const int nodes = std::atoi(item.c_str()); nodes != 0) base.coarse_prepass_nodes.push_back(nodes);
     }
     else {
-      std::fprintf(stderr, "usage: bench_fit [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N] "
+      std::fprintf(stderr, "usage: bench_fit [-v|--verbose] [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N] "
                            "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--max-iterations N] "
                            "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--hole-axis 0|1|2] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
                            "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W] [--coarse-prepass N[,N...]]\n");

@@ -66,3 +66,29 @@ TEST(Harmonic, RejectsBadInput) {
   h.compute(m.V, m.F, {0, 1});
   EXPECT_THROW(h.interpolate(Eigen::MatrixXd::Zero(3, 1)), InvalidInput);
 }
+
+// The matrix overload (the deformer passes the cotangent matrix its Laplacian was scaled from):
+// the same bits as building it from V and F, for both weightings; a matrix of another mesh is
+// refused.
+TEST(Harmonic, GivenTheMeshMatrixGivesTheSameBits) {
+  const TriMesh m = make_grid(20, 14, 2.0, 1.0, 0.2, 3);
+  const std::vector<int> b{0, 7, 160, 311};
+  Eigen::MatrixXd v(4, 4);
+  v << 1, 0, 0, 0, 0.5, 0.5, 0.5, 0.5, 0, 1, 0, 0, 0.2, -0.3, 0.9, 0.1;
+  for (const auto w : {LaplacianWeights::Cotangent, LaplacianWeights::Uniform}) {
+    HarmonicInterpolator a, c;
+    a.compute(m.V, m.F, b, w);
+    Eigen::SparseMatrix<double> C;
+    (void)laplacian(m.V, m.F, w, 0.1, &C);
+    c.compute(C, m.F, b);
+    const Eigen::MatrixXd ra = a.interpolate(v), rc = c.interpolate(v);
+    ASSERT_EQ(ra.rows(), rc.rows());
+    EXPECT_EQ(ra, rc);
+    // a non-trivial field (not the constant the rows' zero sums would give for equal values)
+    EXPECT_GT(ra.col(0).maxCoeff() - ra.col(0).minCoeff(), 0.5);
+  }
+  const TriMesh other = make_grid(5, 5, 1.0, 1.0, 0.0, 1);
+  HarmonicInterpolator h;
+  EXPECT_THROW(h.compute(cotangent_matrix(other.V, other.F), m.F, b), InvalidInput);
+  EXPECT_THROW(h.compute(Eigen::SparseMatrix<double>(m.V.rows(), 3), m.F, b), InvalidInput);
+}

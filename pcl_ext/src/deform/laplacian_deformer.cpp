@@ -71,7 +71,7 @@ void LaplacianDeformer::setMesh(const TriMesh& mesh) {
   for (const auto& c : constraints_) checkConstraint(c, "setMesh");
   const auto t0 = Clock::now();
   report_progress(progress_, 0.0, "laplacian");
-  L_ = laplacian(mesh_.V, mesh_.F, weights_, sliver_guard_);
+  L_ = laplacian(mesh_.V, mesh_.F, weights_, sliver_guard_, &cache_->C);
   if (weights_ == LaplacianWeights::Cotangent) {
     const Eigen::VectorXd A = voronoi_areas(mesh_.V, mesh_.F);
     double sum = 0;

@@ -46,6 +46,7 @@ struct LaplacianDeformer::Cache {
   std::vector<char> isolated;
   // rotation field
   bool graph_valid = false;
+  Eigen::SparseMatrix<double> C;  // the mesh's symmetric matrix L̂ is scaled from (laplacian()'s `stiffness`)
   ConstraintGraph graph;
   RotationField field;
   std::vector<std::vector<int>> node_constraints;  // per graph node, constraint ids

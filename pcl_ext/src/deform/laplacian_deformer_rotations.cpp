@@ -103,7 +103,7 @@ void LaplacianDeformer::buildRotationGraph(bool with_progress) {
     parent[f] = c.field_node[f];
     order.push_back(int(f));
   }
-  c.field.compute(mesh_.V, mesh_.F, c.field_vertices, parent, order, weights_);
+  c.field.compute(c.C, mesh_.F, c.field_vertices, parent, order);  // the matrix setMesh built
   c.graph_valid = true;
   report_.t_graph = seconds_since(t0);
 }

@@ -120,7 +120,13 @@ std::vector<Eigen::Matrix3d> node_rotations(const ConstraintGraph& graph, const 
 
 void RotationField::compute(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::vector<int>& nodes,
                             std::vector<int> tree_parent, std::vector<int> tree_order, LaplacianWeights weights) {
-  harmonic_.compute(V, F, nodes, weights);
+  compute(weights == LaplacianWeights::Cotangent ? cotangent_matrix(V, F) : uniform_graph_laplacian(F, V.rows()), F,
+          nodes, std::move(tree_parent), std::move(tree_order));
+}
+
+void RotationField::compute(const Eigen::SparseMatrix<double>& C, const Eigen::MatrixX3i& F, const std::vector<int>& nodes,
+                            std::vector<int> tree_parent, std::vector<int> tree_order) {
+  harmonic_.compute(C, F, nodes);
   if (tree_parent.empty()) {
     parent_.assign(nodes.size(), -1);
     order_.resize(nodes.size());

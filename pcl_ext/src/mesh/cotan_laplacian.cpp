@@ -167,7 +167,7 @@ Eigen::SparseMatrix<double> uniform_graph_laplacian(const Eigen::MatrixX3i& F, E
 }
 
 Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, LaplacianWeights weights,
-                                      double sliver_guard) {
+                                      double sliver_guard, Eigen::SparseMatrix<double>* stiffness) {
   if (!(sliver_guard >= 0 && std::isfinite(sliver_guard)))
     throw InvalidInput("[tbsp::laplacian] sliver_guard must be >= 0 and finite (0: off)");
   const Eigen::Index n = V.rows();
@@ -232,6 +232,7 @@ Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::Ma
       L.setFromTriplets(t.begin(), t.end());
     }
   }
+  if (stiffness) *stiffness = std::move(K);
   return L;
 }
 

@@ -9,8 +9,20 @@ namespace tbsp {
 
 void HarmonicInterpolator::compute(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                                    const std::vector<int>& constrained, LaplacianWeights weights) {
+  compute(weights == LaplacianWeights::Cotangent ? cotangent_matrix(V, F) : uniform_graph_laplacian(F, V.rows()), F,
+          constrained);
+}
+
+void HarmonicInterpolator::compute(const Eigen::SparseMatrix<double>& C, const Eigen::MatrixX3i& F,
+                                   const std::vector<int>& constrained) {
   const std::string who = "[tbsp::HarmonicInterpolator::compute] ";
-  const Eigen::Index n = V.rows();
+  const Eigen::Index n = C.rows();
+  if (C.cols() != n)
+    throw InvalidInput(who + "the matrix is " + std::to_string(C.rows()) + " by " + std::to_string(C.cols()) +
+                       "; it must be square (#V by #V)");
+  if (F.size() > 0 && (F.minCoeff() < 0 || F.maxCoeff() >= n))
+    throw InvalidInput(who + "the faces index vertices 0.." + std::to_string(F.maxCoeff()) + " but the matrix has " +
+                       std::to_string(n) + " rows; pass the matrix of this mesh");
   if (constrained.empty()) throw InvalidInput(who + "no constrained vertices; give at least one value");
   std::vector<char> is_c(std::size_t(n), 0);
   for (int c : constrained) {
@@ -31,9 +43,7 @@ void HarmonicInterpolator::compute(const Eigen::MatrixX3d& V, const Eigen::Matri
       throw InvalidInput(who + "the mesh component containing vertex " + std::to_string(i) +
                          " has no constrained vertex, so its values are undefined; constrain a vertex there or "
                          "remove the component");
-  Eigen::SparseMatrix<double> K =
-      weights == LaplacianWeights::Cotangent ? Eigen::SparseMatrix<double>(-cotangent_matrix(V, F))
-                                             : Eigen::SparseMatrix<double>(-uniform_graph_laplacian(F, n));
+  const Eigen::SparseMatrix<double>& K = C;  // the system is −C (SPD on the free vertices)
   free_index_.assign(std::size_t(n), -1);
   std::vector<int> c_index(std::size_t(n), -1);
   int nf = 0;
@@ -46,8 +56,8 @@ void HarmonicInterpolator::compute(const Eigen::MatrixX3d& V, const Eigen::Matri
       const int r = free_index_[std::size_t(it.row())];
       if (r < 0) continue;
       const int cf = free_index_[std::size_t(it.col())];
-      if (cf >= 0) tff.emplace_back(r, cf, it.value());
-      else if (c_index[std::size_t(it.col())] >= 0) tfb.emplace_back(r, c_index[std::size_t(it.col())], it.value());
+      if (cf >= 0) tff.emplace_back(r, cf, -it.value());
+      else if (c_index[std::size_t(it.col())] >= 0) tfb.emplace_back(r, c_index[std::size_t(it.col())], -it.value());
     }
   Eigen::SparseMatrix<double> Kff(nf, nf);
   Kff.setFromTriplets(tff.begin(), tff.end());

@@ -60,6 +60,11 @@ public:
   void compute(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::vector<int>& nodes,
                std::vector<int> tree_parent = {}, std::vector<int> tree_order = {},
                LaplacianWeights weights = LaplacianWeights::Cotangent);
+  /// \brief The same with the mesh's matrix C given (cotangent_matrix(V, F), or
+  /// uniform_graph_laplacian for uniform weights; see HarmonicInterpolator::compute): same
+  /// result, without assembling it again.
+  void compute(const Eigen::SparseMatrix<double>& C, const Eigen::MatrixX3i& F, const std::vector<int>& nodes,
+               std::vector<int> tree_parent = {}, std::vector<int> tree_order = {});
   /// \brief One rotation per node (in the order of `nodes`) → one rotation per vertex.
   /// Vertices where the interpolated quaternion vanishes
   /// (opposite rotations cancelling, practically impossible after the hemisphere step) get the

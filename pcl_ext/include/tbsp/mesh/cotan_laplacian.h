@@ -61,8 +61,12 @@ Eigen::SparseMatrix<double> uniform_graph_laplacian(const Eigen::MatrixX3i& F, E
 /// vertex surrounded by slivers gets a bounded row instead of one that outweighs the rest of a
 /// least-squares system by orders of magnitude. The fitter's Laplacian updating uses 0.1 (its
 /// intermediate meshes can have slivers).
+/// \param stiffness if not null, receives the symmetric matrix the rows are scaled from:
+/// cotangent_matrix(V, F) or uniform_graph_laplacian(F, #V), the same bits as those calls
+/// (for a harmonic system on the same mesh, HarmonicInterpolator::compute, without building
+/// it twice).
 Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                                       LaplacianWeights weights = LaplacianWeights::Cotangent,
-                                      double sliver_guard = 0);
+                                      double sliver_guard = 0, Eigen::SparseMatrix<double>* stiffness = nullptr);
 
 }  // namespace tbsp

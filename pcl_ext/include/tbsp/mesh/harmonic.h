@@ -30,6 +30,14 @@ public:
   void compute(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::vector<int>& constrained,
                LaplacianWeights weights = LaplacianWeights::Cotangent);
 
+  /// \brief The same with the mesh's matrix given: `C` = cotangent_matrix(V, F) (or
+  /// uniform_graph_laplacian(F, #V) for uniform weights), #V by #V, symmetric, off-diagonal ≥ 0
+  /// on a well-shaped mesh, rows summing to 0. For callers that already have it (laplacian()'s
+  /// `stiffness`): the result is the same to the last bit as compute(V, F, …) and the O(#F)
+  /// assembly is skipped. F gives the components (each needs a constrained vertex).
+  /// \throws InvalidInput as compute(), and when C is not #V by #V for the #V of F's indices.
+  void compute(const Eigen::SparseMatrix<double>& C, const Eigen::MatrixX3i& F, const std::vector<int>& constrained);
+
   /// \brief Interpolates `values` (one row per constrained vertex, in the order given to
   /// compute(), any number of columns) to all vertices. Constrained vertices keep their values
   /// exactly; isolated unconstrained vertices get 0. O(#V · cols) back-substitution.
