@@ -142,6 +142,12 @@ TEST(TemplateFittingBadInput, ClearErrors) {
   fit.setInputCloud(nan_cloud);
   fit.setMarkers({FitMarker{0, 0}});
   expect_error("no finite points");
+  // finite points, no usable normal (given as zero here; estimated normals fail this way from
+  // coordinates that overflow single precision): said so, not "NaN/Inf points"
+  pcl::PointCloud<pcl::PointNormal>::Ptr no_normals(new pcl::PointCloud<pcl::PointNormal>(*cloud));
+  for (auto& p : *no_normals) p.normal_x = p.normal_y = p.normal_z = 0;
+  fit.setInputCloud(no_normals);
+  expect_error("no point of the input cloud has a usable normal (500 finite points");
   fit.setInputCloud(cloud);
   FitMarker bad_vertex;
   bad_vertex.template_vertex = 100000;

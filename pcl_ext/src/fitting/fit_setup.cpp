@@ -75,8 +75,18 @@ PreparedCloud prepare_cloud(const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d
       keep.push_back(i);
     }
   c.points_skipped_nonfinite = P_in.rows() - Eigen::Index(keep.size());
-  if (keep.empty())
-    throw InvalidInput(who + "the input cloud has no finite points (all " + std::to_string(P_in.rows()) + " are NaN/Inf)");
+  if (keep.empty()) {
+    Eigen::Index nonfinite = 0;
+    for (Eigen::Index i = 0; i < P_in.rows(); ++i) nonfinite += !P_in.row(i).allFinite();
+    if (nonfinite == P_in.rows())
+      throw InvalidInput(who + "the input cloud has no finite points (all " + std::to_string(P_in.rows()) + " are NaN/Inf)");
+    // finite points whose normals are unusable: given that way, or estimated from too few
+    // neighbours or from coordinates whose squares overflow single precision (|x| > ~1e19)
+    throw InvalidInput(who + "no point of the input cloud has a usable normal (" + std::to_string(P_in.rows() - nonfinite) +
+                       " finite points, every normal NaN/Inf or zero); give finite unit normals, or for normals "
+                       "estimated from the points: enough neighbours per point and coordinates in a sane unit (metres, "
+                       "millimetres)");
+  }
   const Eigen::Index np = c.np = Eigen::Index(keep.size());
   Eigen::MatrixX3d& P = c.P;
   P.resize(np, 3);
