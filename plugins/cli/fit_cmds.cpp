@@ -115,7 +115,12 @@ struct SynthArgs {
 
 int cmd_synth_scan(const SynthArgs& a) {
   const tbsp::TriMesh m = tbsp::read_mesh(a.mesh);
-  const tbsp::synth::Scenario s = tbsp::synth::make_scenario(m, a.o);
+  tbsp::synth::Scenario s;
+  try {
+    s = tbsp::synth::make_scenario(m, a.o);
+  } catch (const tbsp::InvalidInput& e) {
+    throw tbsp::InvalidInput(a.mesh + ": " + e.what());  // the options' and the mesh's problems, with the file
+  }
   tbsp::TriMesh cloud;
   cloud.V = s.P;
   cloud.N = s.N;

@@ -3,8 +3,10 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 #include <random>
+#include <string>
 
 #include "tbsp/core/error.h"
 #include "tbsp/mesh/point_mesh_distance.h"
@@ -163,9 +165,34 @@ std::vector<Joint> human_limbs(double a) {
           joint({-0.1, 0.47, -0.01}, -Y, X, 0.04, a, {-0.12, 0.03, 0.05})};    // right knee bends
 }
 
-Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
+namespace {
+
+// Options a scenario cannot be made from: an InvalidInput naming the option, its value and the
+// range (the CLI's synth-scan passes them straight through).
+void check_options(const ScenarioOptions& o) {
+  const std::string who = "synth::make_scenario: ";
+  auto bad = [&](const std::string& what, double v, const std::string& range) {
+    throw InvalidInput(who + what + " = " + std::to_string(v) + " is out of range; use " + range);
+  };
   if (o.hole_axis < 0 || o.hole_axis > 2)
-    throw InvalidInput("synth::make_scenario: hole_axis " + std::to_string(o.hole_axis) + " is not 0, 1 or 2 (a principal axis)");
+    throw InvalidInput(who + "hole_axis " + std::to_string(o.hole_axis) + " is not 0, 1 or 2 (a principal axis)");
+  if (o.points < 1 || o.points > 50000000) bad("points", o.points, "1..50,000,000");
+  if (!(o.outliers >= 0 && o.outliers < 1)) bad("outliers", o.outliers, "a fraction in [0, 1)");
+  if (!(o.hole >= 0 && o.hole < 1)) bad("hole", o.hole, "a fraction of the surface in [0, 1)");
+  if (!(o.noise >= 0 && o.noise <= 1)) bad("noise", o.noise, "a fraction of the bbox diagonal in [0, 1]");
+  if (!(o.scale > 0 && std::isfinite(o.scale))) bad("scale", o.scale, "a finite factor > 0");
+  if (!std::isfinite(o.bend_deg)) bad("bend", o.bend_deg, "a finite angle in degrees");
+  if (!std::isfinite(o.twist_deg)) bad("twist", o.twist_deg, "a finite angle in degrees");
+  if (!o.translation.allFinite()) throw InvalidInput(who + "translation is not finite");
+  if (!(o.fragment_offset >= 0 && std::isfinite(o.fragment_offset))) bad("fragment_offset", o.fragment_offset, "a finite value >= 0");
+  if (o.markers < 0) bad("markers", o.markers, "a count >= 0");
+}
+
+}  // namespace
+
+Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
+  check_options(o);
+  if (templ.F.rows() == 0) throw InvalidInput("synth::make_scenario: the mesh has no faces; a scan is sampled from its surface");
   Scenario s;
   s.templ = templ;
   s.target = bend_twist_scale(o.joints.empty() ? templ.V : articulate(templ.V, templ.F, o.joints), o);
@@ -192,6 +219,9 @@ Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
     hole_face[std::size_t(f)] = 1;
     removed += area(f);
   }
+  if (!(total > 0))
+    throw InvalidInput("synth::make_scenario: the deformed mesh has no surface area (every face degenerate, or NaN "
+                       "coordinates); check the mesh with tbsp validate");
   s.hole_area_fraction = removed / total;
   s.hole_vertex.assign(std::size_t(templ.V.rows()), 1);
   std::vector<char> touched(std::size_t(templ.V.rows()), 0);
@@ -208,8 +238,14 @@ Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
   double acc = 0;
   for (Eigen::Index f = 0; f < F.rows(); ++f)
     if (!hole_face[std::size_t(f)]) { acc += area(f); cdf.push_back(acc); faces.push_back(f); }
+  if (!(acc > 0))
+    throw InvalidInput("synth::make_scenario: the hole (" + std::to_string(o.hole) +
+                       ") leaves no surface to sample; make it smaller");
   const int n_out = int(std::lround(o.points * o.outliers));
   const int n_in = o.points - n_out;
+  if (n_in < 1)
+    throw InvalidInput("synth::make_scenario: " + std::to_string(o.points) + " points with outliers " + std::to_string(o.outliers) +
+                       " leave no inlier; raise points or lower outliers");
   std::uniform_real_distribution<double> uni(0, 1);
   std::normal_distribution<double> gauss(0, o.noise * s.diag);
   Eigen::MatrixX3d P(o.points, 3), N(o.points, 3), C(o.points, 3);
@@ -257,10 +293,15 @@ Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
     if (s.inlier[std::size_t(i)]) { inP.row(Eigen::Index(in_idx.size())) = s.P.row(i); in_idx.push_back(i); }
   const PointSearch tree(inP);
   std::vector<int> chosen;
+  Eigen::Index eligible = 0;  // template vertices on a face, outside the hole
+  for (Eigen::Index v = 0; v < templ.V.rows(); ++v) eligible += !s.hole_vertex[std::size_t(v)] && touched[std::size_t(v)];
+  if (o.markers > eligible)
+    throw InvalidInput("synth::make_scenario: " + std::to_string(o.markers) + " markers asked for, but only " +
+                       std::to_string(eligible) + " template vertices lie outside the hole; ask for fewer");
   Eigen::VectorXd d = Eigen::VectorXd::Constant(templ.V.rows(), 1e300);
   int start = 0;
-  while (s.hole_vertex[std::size_t(start)]) ++start;
-  chosen.push_back(start);
+  while (s.hole_vertex[std::size_t(start)] || !touched[std::size_t(start)]) ++start;
+  if (o.markers > 0) chosen.push_back(start);
   while (int(chosen.size()) < o.markers) {
     d = d.cwiseMin((templ.V.rowwise() - templ.V.row(chosen.back())).rowwise().norm());
     Eigen::Index best = -1;

@@ -202,6 +202,57 @@ TEST(CliRobustness, MeshWithoutAreaIsRejected) {
   std::filesystem::remove_all(dir);
 }
 
+// Found by hand (2026-12-06): synth-scan segfaulted on a degenerate mesh, a one-triangle mesh,
+// --hole 1, --outliers 1 and more markers than vertices, and wrote NaN or mirrored scans for
+// --scale 0 / -1. Each is now exit 2 naming the mesh file and the option, and no file is written.
+TEST(CliRobustness, SynthScanRefusesOptionsAndMeshesItCannotSample) {
+  const auto dir = test::temp_dir("rob_synth");
+  TriMesh tri;
+  tri.V.resize(3, 3);
+  tri.V << 0, 0, 0, 1, 0, 0, 0, 1, 0;
+  tri.F.resize(1, 3);
+  tri.F << 0, 1, 2;
+  const std::string tri_mesh = (dir / "tri.ply").string();
+  write_mesh(tri_mesh, tri);
+  TriMesh flat = tri;
+  flat.V.row(2) = flat.V.row(1);
+  const std::string flat_mesh = (dir / "flat.ply").string();
+  write_mesh(flat_mesh, flat);
+  const std::string cloud = (dir / "c.ply").string(), markers = (dir / "m.json").string();
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"--mesh " + flat_mesh, "no surface area"},
+      {"--mesh " + tri_mesh + " --hole 0 --markers 10", "10 markers asked for, but only 3"},
+      {"--mesh " + tri_mesh, "the hole (0.250000) leaves no surface to sample"},  // the default hole takes the one face
+      {"--mesh " + kTemplate + " --hole 1", "hole = 1"},
+      {"--mesh " + kTemplate + " --outliers 1", "outliers = 1"},
+      {"--mesh " + kTemplate + " --points 2 --outliers 0.9", "leave no inlier"},
+      {"--mesh " + kTemplate + " --points 0", "points = 0"},
+      {"--mesh " + kTemplate + " --scale 0", "scale = 0"},
+      {"--mesh " + kTemplate + " --scale -1", "scale = -1"},
+      {"--mesh " + kTemplate + " --noise 1e300", "noise = "},
+      {"--mesh " + kTemplate + " --markers -1", "markers = -1"},
+  };
+  for (const auto& [args, needle] : cases) {
+    const CliResult r = run_cli("synth-scan " + args + " --out-cloud " + cloud + " --out-markers " + markers, dir);
+    EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(needle), std::string::npos) << args << "\n" << r.err;
+    EXPECT_TRUE(r.err.find(".ply: synth::make_scenario") != std::string::npos ||
+                r.err.find(".off: synth::make_scenario") != std::string::npos)
+        << "names the mesh: " << r.err;
+    EXPECT_FALSE(std::filesystem::exists(cloud)) << args;
+  }
+  // what still works: the one triangle with up to 3 markers, and no markers at all
+  CliResult r = run_cli("synth-scan --mesh " + tri_mesh + " --markers 3 --points 50 --hole 0 --out-cloud " + cloud +
+                            " --out-markers " + markers, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("50 points"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("3 markers"), std::string::npos) << r.out;
+  r = run_cli("synth-scan --mesh " + kTemplate + " --markers 0 --out-cloud " + cloud + " --out-markers " + markers, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find(" 0 markers"), std::string::npos) << r.out;
+  std::filesystem::remove_all(dir);
+}
+
 // The mocap readers are reachable from the CLI: inspect, convert C3D <-> TRC, BVH -> positions.
 TEST(CliRobustness, MocapInspectsAndConvertsMarkers) {
   const auto dir = test::temp_dir("rob_mocap");
