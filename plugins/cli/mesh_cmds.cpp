@@ -203,6 +203,15 @@ int cmd_render(const RenderArgs& a) {
 }
 
 int cmd_generate(const GenerateArgs& a) {
+  // sizes checked here: 1 << level and rings × segments would overflow or ask for more memory
+  // than a mesh file is worth before the generators could refuse them
+  if ((a.shape == "grid" && (a.level < 0 || a.level > 11)) || (a.shape == "box" && (a.level < 0 || a.level > 8)))
+    throw tbsp::InvalidInput("--level " + std::to_string(a.level) + " is out of range for a " + a.shape + "; use 0.." +
+                             (a.shape == "grid" ? "11 (2^level cells per side)" : "8 (5·2^level × 2^level × 2^level cells)"));
+  if ((a.shape == "tube" || a.shape == "bumpy-bar") && (a.rings > 100000 || a.segments > 100000 ||
+                                                        double(a.rings) * double(a.segments) > 2e7))
+    throw tbsp::InvalidInput("--rings " + std::to_string(a.rings) + " × --segments " + std::to_string(a.segments) +
+                             " is too large; use at most 100000 each and 20 million vertices in all");
   tbsp::TriMesh m;
   if (a.shape == "icosphere") m = tbsp::make_icosphere(a.level);
   else if (a.shape == "grid") m = tbsp::make_grid(1 << a.level, 1 << a.level);

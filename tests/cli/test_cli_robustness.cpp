@@ -253,6 +253,40 @@ TEST(CliRobustness, SynthScanRefusesOptionsAndMeshesItCannotSample) {
   std::filesystem::remove_all(dir);
 }
 
+// `tbsp generate`: each shape is a valid mesh of the documented size; sizes whose 2^level or
+// rings × segments overflow or exhaust memory exit 2 naming the option (found by hand
+// 2026-12-06: a negative grid level and 10^9 tube segments ended in std::bad_alloc, exit 1).
+TEST(CliRobustness, GenerateWritesEachShapeAndRefusesSizesItCannotHold) {
+  const auto dir = test::temp_dir("rob_generate");
+  const std::string out = (dir / "g.ply").string();
+  const std::vector<std::pair<std::string, Eigen::Index>> shapes = {
+      {"icosphere --level 2", 162}, {"grid --level 3", 81}, {"tube --rings 5 --segments 8", 5 * 8 + 2}, {"bumpy-bar", 60 * 24 + 2}};  // + the two cap centres
+  for (const auto& [args, vertices] : shapes) {
+    std::filesystem::remove(out);
+    const CliResult r = run_cli("generate " + args + " --out " + out, dir);
+    ASSERT_EQ(r.code, 0) << args << "\n" << r.err;
+    const TriMesh m = read_mesh(out);
+    EXPECT_EQ(m.V.rows(), vertices) << args;
+    EXPECT_GT(m.F.rows(), 0) << args;
+  }
+  std::filesystem::remove(out);
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"grid --level -3", "--level -3 is out of range for a grid"},
+      {"grid --level 31", "--level 31 is out of range for a grid"},
+      {"box --level 9", "--level 9 is out of range for a box"},
+      {"tube --segments 1000000000", "is too large"},
+      {"bumpy-bar --rings 1", "rings >= 2"},
+      {"icosphere --level 12", "level must be in 0..9"},
+  };
+  for (const auto& [args, needle] : bad) {
+    const CliResult r = run_cli("generate " + args + " --out " + out, dir);
+    EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(needle), std::string::npos) << args << "\n" << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out)) << args;
+  }
+  std::filesystem::remove_all(dir);
+}
+
 // The mocap readers are reachable from the CLI: inspect, convert C3D <-> TRC, BVH -> positions.
 TEST(CliRobustness, MocapInspectsAndConvertsMarkers) {
   const auto dir = test::temp_dir("rob_mocap");
