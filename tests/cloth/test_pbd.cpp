@@ -5,6 +5,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <string>
 
 #include "tbsp/cloth/pbd_cloth_simulator.h"
 #include "tbsp/core/error.h"
@@ -231,4 +233,38 @@ TEST(PbdCloth, BadInputIsAClearError) {
   Eigen::MatrixX3i F = grid.F;
   F(0, 1) = F(0, 0);
   EXPECT_THROW(sim.setMesh(grid.V, F), InvalidInput);
+}
+
+// Found by hand (2026-12-06): `tbsp cloth synth --d-n 1e300` wrote frames of NaN positions and
+// exited 0. An infinite drag is refused; a finite one that makes the explicit step diverge ends
+// the step with NumericalFailure instead of handing out non-finite positions; the thesis'
+// largest drags (d_n 10, d_t 50) simulate a swinging curtain as before.
+TEST(PbdCloth, ADivergingStepIsAnErrorNotAFrameOfNaN) {
+  {
+    Hanging h;
+    const double inf = std::numeric_limits<double>::infinity();
+    EXPECT_THROW(h.sim.setMaterial({inf, 4.0, 0.3}), InvalidInput);
+    EXPECT_THROW(h.sim.setMaterial({2.0, inf, 0.3}), InvalidInput);
+  }
+  {
+    Hanging h;
+    h.sim.setMaterial({1e300, 1e300, 0.3});
+    bool threw = false;
+    for (int f = 0; f < 20 && !threw; ++f) {
+      try {
+        h.sim.step(Eigen::MatrixX3d());
+        ASSERT_TRUE(h.sim.positions().allFinite()) << "frame " << f;
+      } catch (const NumericalFailure& e) {
+        threw = true;
+        EXPECT_NE(std::string(e.what()).find("diverged"), std::string::npos) << e.what();
+      }
+    }
+    EXPECT_TRUE(threw) << "a drag of 1e300 did not diverge; the test needs a case that does";
+  }
+  {
+    Hanging h;
+    h.sim.setMaterial({10.0, 50.0, 0.3});
+    for (int f = 0; f < 40; ++f) ASSERT_NO_THROW(h.sim.step(Eigen::MatrixX3d())) << "frame " << f;
+    EXPECT_TRUE(h.sim.positions().allFinite());
+  }
 }

@@ -50,7 +50,8 @@ void AnimatableModel::validate(const char* where) const {
   if (region.size() && (region.minCoeff() < 0 || region.maxCoeff() >= int(materials.size())))
     throw InvalidInput(w + "a region label has no material (labels 0.." + std::to_string(materials.size() - 1) + ")");
   for (const auto& m : materials)
-    if (!(m.d_n >= 0) || !(m.d_t >= 0) || !(m.k_bend >= 0 && m.k_bend <= 1)) throw InvalidInput(w + "a material is out of range (d_n, d_t ≥ 0, k_bend in [0, 1])");
+    if (!(m.d_n >= 0) || !(m.d_t >= 0) || !std::isfinite(m.d_n + m.d_t) || !(m.k_bend >= 0 && m.k_bend <= 1))
+      throw InvalidInput(w + "a material is out of range (finite d_n, d_t ≥ 0, k_bend in [0, 1])");
   for (const auto& p : proxies)
     if (p.bone.joint < 0 || p.bone.joint >= skeleton.numJoints() || !p.cone.a.allFinite() || !p.cone.b.allFinite() || !(p.cone.ra >= 0) ||
         !(p.cone.rb >= 0))

@@ -196,8 +196,8 @@ void PbdClothSimulator::setRegions(const Eigen::VectorXi& region) {
 
 void PbdClothSimulator::setMaterial(const ClothMaterial& m, int region) {
   if (region < 0) throw InvalidInput(std::string(kSimulatorWhere) + "setMaterial: region must be ≥ 0");
-  if (!(m.d_n >= 0) || !(m.d_t >= 0) || !(m.k_bend >= 0 && m.k_bend <= 1))
-    throw InvalidInput(std::string(kSimulatorWhere) + "setMaterial: need d_n ≥ 0, d_t ≥ 0 and k_bend in [0, 1] (got " +
+  if (!(m.d_n >= 0) || !(m.d_t >= 0) || !std::isfinite(m.d_n + m.d_t) || !(m.k_bend >= 0 && m.k_bend <= 1))
+    throw InvalidInput(std::string(kSimulatorWhere) + "setMaterial: need finite d_n ≥ 0, d_t ≥ 0 and k_bend in [0, 1] (got " +
                        std::to_string(m.d_n) + ", " + std::to_string(m.d_t) + ", " + std::to_string(m.k_bend) + ")");
   if (int(materials_.size()) <= region) materials_.resize(std::size_t(region + 1), materials_.front());
   materials_[std::size_t(region)] = m;
@@ -296,6 +296,12 @@ void PbdClothSimulator::step(const Eigen::MatrixX3d& targets_in, const std::vect
   targets_prev_ = targets;
   proxies_prev_ = proxies;
   syncOut();
+  // an explicit step can diverge (drag coefficients far beyond the thesis' ranges, a time step
+  // too long for the stiffness): refuse to hand out non-finite positions as a frame
+  if (!x_.allFinite() || !u_.allFinite())
+    throw NumericalFailure(std::string(kSimulatorWhere) + "step: the simulation diverged (non-finite positions or velocities "
+                           "after this frame); lower the drag coefficients d_n / d_t (the thesis searches d_n in [0, 10], "
+                           "d_t in [0, 50]) or shorten the time step (more substeps)");
 }
 
 void PbdClothSimulator::syncOut() {

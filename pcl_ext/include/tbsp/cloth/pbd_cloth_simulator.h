@@ -91,7 +91,7 @@ public:
   /// \brief Per-vertex region label (0..k−1) choosing the material; default all 0.
   void setRegions(const Eigen::VectorXi& region);
   /// Material of region r (extends the table as needed). \throws InvalidInput for values outside
-  /// d_n, d_t ≥ 0 and k_bend ∈ [0, 1].
+  /// finite d_n, d_t ≥ 0 and k_bend ∈ [0, 1].
   void setMaterial(const ClothMaterial& m, int region = 0);
   /// Settings; takes effect at the next step(). \throws InvalidInput for values out of range.
   void setSettings(const PbdSettings& s);
@@ -106,7 +106,9 @@ public:
   /// constraints and kinematic vertices; empty = keep the current positions of kinematic
   /// vertices and no blend), `proxies` the collision cones in this frame's pose (their previous
   /// frame's poses give the surface velocity for friction).
-  /// \throws InvalidInput on a size mismatch or non-finite targets.
+  /// \throws InvalidInput on a size mismatch or non-finite targets; NumericalFailure when the
+  /// frame ends with non-finite positions or velocities (an explicit step diverged: drag far
+  /// beyond the thesis' ranges, or too long a time step), instead of handing them out.
   void step(const Eigen::MatrixX3d& targets, const std::vector<RoundCone>& proxies = {});
 
   const Eigen::MatrixX3d& positions() const { return x_; }
