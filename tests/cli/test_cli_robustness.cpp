@@ -287,6 +287,30 @@ TEST(CliRobustness, GenerateWritesEachShapeAndRefusesSizesItCannotHold) {
   std::filesystem::remove_all(dir);
 }
 
+// Found by hand (2026-12-06): CLI11's number checks let "nan" through (`deform --scale nan`
+// silently used the constraints file's scale, exit 0). Any FLOAT option given a non-finite
+// value exits 2 naming it, before the command runs.
+TEST(CliRobustness, NonFiniteNumbersAreRefusedForEveryFloatOption) {
+  const auto dir = test::temp_dir("rob_nan");
+  const std::string out = (dir / "o.ply").string();
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"deform -q --mesh " + kTemplate + " --constraints " + test::sample("bend_90.json") + " --out " + out + " --scale nan",
+       "--scale nan"},
+      {fit_args(dir) + " --detail-radius-factor -nan", "--detail-radius-factor -nan"},
+      {fit_args(dir) + " --r-max NaN", "--r-max NaN"},
+      {"synth-scan --mesh " + kTemplate + " --out-cloud " + out + " --out-markers " + (dir / "m.json").string() + " --noise nan",
+       "--noise nan"},
+  };
+  for (const auto& [args, needle] : cases) {
+    const CliResult r = run_cli(args, dir);
+    EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(needle + " is not a finite number"), std::string::npos) << args << "\n" << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out)) << args;
+    EXPECT_FALSE(std::filesystem::exists(dir / "fit.ply")) << args;
+  }
+  std::filesystem::remove_all(dir);
+}
+
 // The mocap readers are reachable from the CLI: inspect, convert C3D <-> TRC, BVH -> positions.
 TEST(CliRobustness, MocapInspectsAndConvertsMarkers) {
   const auto dir = test::temp_dir("rob_mocap");
