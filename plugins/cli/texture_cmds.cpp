@@ -56,7 +56,7 @@ void add_texture(CLI::App& app, TextureArgs& a, CLI::App*& sub) {
   sub->add_option("--surface", a.surface, "also write the deformed image surface as a coloured mesh (.ply .obj .off .vtk); "
                                           "with --offset and --mask this is the draped garment");
   sub->add_option("--offset", a.offset, "draping (§4.4): offset along the mesh normals, in mesh units");
-  sub->add_option("--omega", a.omega, "constraint weight (default 10; large = hard)")->check(CLI::PositiveNumber);
+  sub->add_option("--omega", a.omega, "constraint weight (default 10, at least 0.001; large = hard)")->check(CLI::Range(0.001, 1e300));
   sub->add_option("--sigma", a.sigma, "match weight in the final deformation (default 1; small = smoother surface)")->check(CLI::NonNegativeNumber);
   sub->add_option("--epsilon", a.epsilon, "match threshold factor: eps = factor * bbox diagonal * k (default 0.01)")->check(CLI::PositiveNumber);
   sub->add_option("--max-solve-nodes", a.max_solve_nodes, "larger images are solved on a coarser grid (default 400000)")->check(CLI::Range(16L, 100000000L));

@@ -59,7 +59,7 @@ void register_texture_stages(Registry& r) {
                          "(thesis ch. 4); the mesh gets per-vertex colours from the image"};
   s.params = {ParamSpec::input_path("image", "the texture image (PNG, JPEG)", true),
               ParamSpec::input_path("constraints", "constraints JSON (docs/texture_json.md), at least 3", true),
-              ParamSpec::real("omega", "10", "constraint weight (large = hard)", 1e-9, 1e12),
+              ParamSpec::real("omega", "10", "constraint weight (large = hard; below ~1e-4 the constraints are lost)", 1e-3, 1e12),
               ParamSpec::real("sigma", "1", "match weight in the final deformation (small = smoother)", 0, 1e12),
               ParamSpec::real("offset", "0", "draping (§4.4): offset along the mesh normals, mesh units", -1e12, 1e12)};
   s.inputs = {{"mesh", DataType::Mesh, "a manifold mesh, any genus"}};

@@ -42,6 +42,16 @@ TEST(TextureErrors, BadInputGivesClearErrors) {
   EXPECT_NE(error_of(m, 64, 64, {good[0], good[1], noidx}).find("face -1 does not exist"), std::string::npos);
   EXPECT_NE(error_of(m, 64, 64, {good[0], good[1], at(5, 5, 7)}).find("same pixel"), std::string::npos);
   EXPECT_NE(error_of(m, 64, 64, {at(5, 5, 0), at(20, 5, 1), at(40, 5, 2)}).find("on one line"), std::string::npos);
+  // one mesh point given two pixels (found by hand 2026-12-06: three pixels on vertex 0 were
+  // accepted, exit 0, 0.07 % of the vertices matched), also as a face point on that vertex
+  EXPECT_NE(error_of(m, 64, 64, {good[0], good[1], at(30, 30, 0)}).find("the same mesh point as constraint 0"), std::string::npos);
+  TextureConstraint on_vertex;
+  on_vertex.pixel = {30, 30};
+  on_vertex.face = 0;
+  on_vertex.barycentric = Eigen::Vector3d::Zero();
+  on_vertex.barycentric(0) = 1;  // the face's first corner
+  const int corner = m.F(0, 0);
+  EXPECT_NE(error_of(m, 64, 64, {at(5, 5, corner), good[1], on_vertex}).find("the same mesh point as constraint 0"), std::string::npos);
   EXPECT_NE(error_of(m, 1, 64, good).find("too small"), std::string::npos);
   // Masks: wrong size, a constraint outside, a piece without constraints.
   EXPECT_NE(error_of(m, 64, 64, good, std::vector<std::uint8_t>(10, 1)).find("mask has 10 entries"), std::string::npos);
@@ -64,4 +74,20 @@ TEST(TextureErrors, BadInputGivesClearErrors) {
   EXPECT_THROW(bad.setOptions(bad_options), InvalidInput);
   EXPECT_THROW(InverseTextureMapping{bad_options}, InvalidInput);
   EXPECT_GT(bad.options().omega, 0.0);  // unchanged by the rejected call
+  bad_options.omega = 1e-6;  // loses the constraints (34 px residuals on the sample bar)
+  EXPECT_THROW(bad.setOptions(bad_options), InvalidInput);
+  // a draping offset beyond the mesh's size (1e300 ended in a heat-geodesics message)
+  InverseTextureMappingOptions far;
+  far.normal_offset = 1e300;
+  InverseTextureMapping itm(far);
+  itm.setInputMesh(m);
+  itm.setImageSize(64, 64);
+  itm.setConstraints(good);
+  try {
+    itm.compute();
+    ADD_FAILURE() << "an offset of 1e300 was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("normal_offset = "), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("beyond the mesh's size"), std::string::npos) << e.what();
+  }
 }

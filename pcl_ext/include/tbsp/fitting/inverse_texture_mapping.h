@@ -74,7 +74,7 @@ enum class MatchDistance {
 };
 
 struct InverseTextureMappingOptions {
-  double omega = 10.0;             ///< weight of the constraints (both deformations); large = hard
+  double omega = 10.0;             ///< weight of the constraints (both deformations), ≥ 0.001; large = hard (below ~1e-4 the solves lose the constraints)
   double sigma = 1.0;              ///< weight of the matches in deform 2; small = smoother, 0 = deform 1 only
   double epsilon_factor = 0.01;    ///< ε = epsilon_factor · bbox diagonal · k (eq. 4.2)
   double ratio_low = 0.8;          ///< mismatch test bounds on mesh/image constraint distances
@@ -92,9 +92,9 @@ struct InverseTextureMappingOptions {
   /// Also measure the deformed image's distortion on the mesh and its fit to the mesh (report
   /// fields surface_*, mesh_to_surface_*): two closest-point passes, ~20 % of a 65k-pixel run.
   bool surface_fit_report = false;
-  double normal_offset = 0.0;      ///< draping (§4.4): targets moved along the mesh normals (mesh units)
+  double normal_offset = 0.0;      ///< draping (§4.4): targets moved along the mesh normals (mesh units; |offset| ≤ the mesh's bbox diagonal, checked by compute())
   ProgressCallback progress;       ///< (set with InverseTextureMapping::setProgressCallback)
-  /// True when omega > 0, sigma >= 0, epsilon_factor > 0, 0 < ratio_low < ratio_high,
+  /// True when omega >= 0.001, sigma >= 0, epsilon_factor > 0, 0 < ratio_low < ratio_high,
   /// max_solve_nodes and max_geodesic_nodes >= 16, heat_time_factor > 0, local_channels >= 0 and
   /// normal_offset is finite; else false and, if given, `why` says which.
   bool isValid(std::string* why = nullptr) const;
