@@ -232,7 +232,8 @@ void add_visual_hull(CLI::App& app, HullArgs& a, CLI::App*& sub) {
 
 int cmd_visual_hull(const HullArgs& a) {
   const Studio st = read_studio(a.studio);
-  const auto [first, last] = parse_frames(a.frame, st);
+  // default: the studio's first frame (an empty --frame would otherwise mean all of them)
+  const auto [first, last] = a.frame.empty() ? std::pair<int, int>(st.first_frame, st.first_frame) : parse_frames(a.frame, st, "--frame");
   if (first != last) throw InvalidInput("--frame takes one frame (not " + a.frame + ")");
   for (const auto& c : st.cameras)
     if (c.silhouettes.empty()) throw InvalidInput("camera '" + c.camera.name() + "' of " + a.studio + " has no silhouettes: the visual hull needs them for every camera");

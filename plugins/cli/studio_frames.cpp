@@ -14,18 +14,18 @@ namespace fs = std::filesystem;
 
 namespace tbsp::cli {
 
-std::pair<int, int> parse_frames(const std::string& s, const Studio& st) {
+std::pair<int, int> parse_frames(const std::string& s, const Studio& st, const std::string& option) {
   if (s.empty()) return {st.first_frame, st.last_frame};
   int a = 0, b = 0;
   char c = 0;
   std::istringstream is(s);
-  if (!(is >> a)) throw InvalidInput("--frames '" + s + "': expected a or a:b (frame numbers)");
+  if (!(is >> a)) throw InvalidInput(option + " '" + s + "': expected a or a:b (frame numbers)");
   b = a;
   if (is >> c) {
-    if (c != ':' || !(is >> b)) throw InvalidInput("--frames '" + s + "': expected a or a:b (frame numbers)");
+    if (c != ':' || !(is >> b)) throw InvalidInput(option + " '" + s + "': expected a or a:b (frame numbers)");
   }
   if (a > b || a < st.first_frame || b > st.last_frame)
-    throw InvalidInput("--frames " + s + " is outside the studio's frames " + std::to_string(st.first_frame) + ".." + std::to_string(st.last_frame));
+    throw InvalidInput(option + " " + s + " is outside the studio's frames " + std::to_string(st.first_frame) + ".." + std::to_string(st.last_frame));
   return {a, b};
 }
 

@@ -15,8 +15,9 @@
 
 namespace tbsp::cli {
 
-/// "--frames a:b" or "a" (the studio's frame numbers, inclusive); empty = all. InvalidInput when malformed or outside the studio.
-std::pair<int, int> parse_frames(const std::string& s, const Studio& st);
+/// "--frames a:b" or "a" (the studio's frame numbers, inclusive); empty = all. InvalidInput when
+/// malformed or outside the studio, naming `option` (the command's own option name).
+std::pair<int, int> parse_frames(const std::string& s, const Studio& st, const std::string& option = "--frames");
 
 // Streams frames first..last of a studio with a progress bar over all of them: `run(frame,
 // progress)` gets each frame and a callback mapping its own [0, 1] into the frame's share.

@@ -138,4 +138,15 @@ TEST(CliPerfCapture, VisualHullAndRegisteredTemplate) {
   r = test::run_cli("visual-hull -q " + st.string() + " --resolution 8 --out " + hull.string(), dir);
   EXPECT_NE(r.code, 0);
   EXPECT_EQ(fs::file_size(hull), size);
+  r = test::run_cli("visual-hull -q " + st.string() + " --frame 5 --out " + hull.string(), dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--frame 5 is outside the studio's frames 0..1"), std::string::npos) << r.err;
+  EXPECT_EQ(fs::file_size(hull), size);
+  // without --frame: the studio's first frame, as the help says (found by hand 2026-12-06: it
+  // meant every frame and failed with "--frame takes one frame (not )")
+  const fs::path hull0 = dir / "hull0.ply";
+  r = test::run_cli("visual-hull -q " + st.string() + " --resolution 32 --out " + hull0.string(), dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("visual hull of frame 0:"), std::string::npos) << r.out;
+  EXPECT_TRUE(fs::exists(hull0));
 }
