@@ -34,8 +34,12 @@ MarkerMap load_marker_map(const std::string& path) try {
       e.vertex = static_cast<int>(v);
     }
     if (j.contains("align")) e.align = in.boolean(j["align"], w + ".align");
-    for (std::size_t k = 0; k < i; ++k)
+    for (std::size_t k = 0; k < i; ++k) {
       if (out[k].marker == e.marker) in.fail(w + ".marker", "'" + e.marker + "' is mapped twice (also markers[" + std::to_string(k) + "])");
+      if (e.vertex >= 0 && out[k].vertex == e.vertex)
+        in.fail(w + ".vertex", "template vertex " + std::to_string(e.vertex) + " also carries markers[" + std::to_string(k) + "] ('" +
+                                   out[k].marker + "'); one vertex cannot follow two markers: pick a neighbouring vertex");
+    }
     if (j.contains("pixels")) {
       const auto& px = j["pixels"];
       if (!px.is_object() || px.empty()) in.fail(w + ".pixels", "expected an object {\"CAMERA\": [x, y], ...} with at least 2 cameras");

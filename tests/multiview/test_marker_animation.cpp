@@ -204,6 +204,8 @@ TEST(MarkerAnimation, BadInputGivesClearErrors) {
   expect_error({{"A", 0, true}, {"B", 50, true}, {"LFHD", 100, true}}, "'LFHD'");
   expect_error({{"A", 0, true}, {"B", 50, true}, {"C", 999999, true}}, "vertex 999999");
   expect_error({{"A", 0, true}, {"A", 50, true}, {"C", 100, true}}, "mapped twice");
+  // two markers on one vertex (found by hand 2026-12-06: a TetDeformer message at frame 0)
+  expect_error({{"A", 0, true}, {"B", 50, true}, {"C", 50, true}}, "'B' and 'C' both map to template vertex 50");
   expect_error({}, "map is empty");
   expect_error({{"A", 0, true}, {"B", 50, false}, {"C", 100, false}}, "3 or more");
   MarkerAnimationOptions o;
@@ -559,6 +561,7 @@ TEST(MarkerMapJson, MalformedMapsNameTheFileAndTheItem) {
       {R"({"markers": [{"marker": "A", "vertex": 1, "point": [0, 0, 0]}]})", "not both"},
       {R"({"markers": [{"marker": "A", "point": [0, 0]}]})", "markers[0].point"},
       {R"({"markers": [{"marker": "A", "vertex": 1}, {"marker": "A", "vertex": 2}]})", "mapped twice"},
+      {R"({"markers": [{"marker": "A", "vertex": 1}, {"marker": "B", "vertex": 1}]})", "markers[1].vertex: template vertex 1 also carries markers[0] ('A')"},
       {R"({"markers": [{"marker": "A", "vertex": 1, "pixels": [1, 2]}]})", "markers[0].pixels"},
       {R"({"markers": [{"marker": "A", "vertex": 1, "pixels": {"c0": [1, 2]}}]})", "at least 2"},
       {R"({"markers": [{"marker": "A", "vertex": 1, "pixels": {"c0": [1, 2], "c1": [1]}}]})", "markers[0].pixels.c1"},

@@ -100,8 +100,12 @@ void MarkerAnimation::start() {
       throw InvalidInput(who + "marker '" + map_[k].marker + "' maps to vertex " + std::to_string(map_[k].vertex) + ", but the template has " +
                          std::to_string(surface_.V.rows()) + " vertices");
     }
-    for (std::size_t j = 0; j < k; ++j)
+    for (std::size_t j = 0; j < k; ++j) {
       if (map_[j].marker == map_[k].marker) throw InvalidInput(who + "marker '" + map_[k].marker + "' is mapped twice");
+      if (map_[k].vertex >= 0 && map_[j].vertex == map_[k].vertex)
+        throw InvalidInput(who + "markers '" + map_[j].marker + "' and '" + map_[k].marker + "' both map to template vertex " +
+                           std::to_string(map_[k].vertex) + "; one vertex cannot follow two markers: pick a neighbouring vertex");
+    }
   }
   auto present = [&](int f, std::size_t k) { return data_.block<1, 3>(f, 3 * column_[k]).allFinite(); };
   // Rest positions of the map entries (template frame; aligned below with the surface).
