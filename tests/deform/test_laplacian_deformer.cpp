@@ -223,6 +223,19 @@ TEST(LaplacianDeformer, RejectsBadConstraintsAndSingularSystems) {
   EXPECT_THROW(d.addPositionConstraint(SurfacePoint::onFace(0, Eigen::Vector3d(0.5, 0.6, 0)), Eigen::Vector3d::Zero()), InvalidInput);
   EXPECT_THROW(d.addPositionConstraint(SurfacePoint::atVertex(0), Eigen::Vector3d(std::nan(""), 0, 0)), InvalidInput);
   EXPECT_THROW(d.addPositionConstraint(SurfacePoint::atVertex(0), Eigen::Vector3d::Zero(), 0.0), InvalidInput);
+  // a weight whose square overflows (found by hand 2026-12-06: 1e300 ended in "the solution is
+  // not finite"); 1e100 is the largest accepted and solves
+  EXPECT_THROW(d.addPositionConstraint(SurfacePoint::atVertex(0), Eigen::Vector3d::Zero(), 1e300), InvalidInput);
+  {
+    LaplacianDeformer big;
+    big.setMesh(m);
+    big.addPositionConstraint(SurfacePoint::atVertex(0), m.V.row(0).transpose() + Eigen::Vector3d(0.1, 0, 0), 1e100);
+    big.addPositionConstraint(SurfacePoint::atVertex(5), m.V.row(5).transpose());
+    const Eigen::MatrixX3d B = big.deform();
+    EXPECT_TRUE(B.allFinite());
+    EXPECT_LT((B.row(0).transpose() - m.V.row(0).transpose() - Eigen::Vector3d(0.1, 0, 0)).norm(), 1e-6);
+    EXPECT_THROW(big.setWeight(0, 1e101), InvalidInput);
+  }
   EXPECT_THROW(d.addLineConstraint(SurfacePoint::atVertex(0), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()), InvalidInput);
   DeformConstraint hard_face;
   hard_face.at = SurfacePoint::onFace(0, Eigen::Vector3d(1, 0, 0));

@@ -32,6 +32,11 @@
 namespace tbsp {
 
 namespace {
+// weights enter the normal equations squared: 1e100² is far from overflow, ~1e154² is not
+constexpr double kMaxConstraintWeight = 1e100;
+}  // namespace
+
+namespace {
 
 
 
@@ -162,8 +167,9 @@ void LaplacianDeformer::checkConstraint(const DeformConstraint& c, const char* w
     if (c.type != ConstraintType::Position || c.at.vertex < 0)
       throw InvalidInput(w + "hard constraints must be position constraints on a vertex; use a soft constraint "
                              "with a large weight for lines, planes and surface points");
-  } else if (!(std::isfinite(c.weight) && c.weight > 0)) {
-    throw InvalidInput(w + "constraint weight must be > 0 and finite (got " + std::to_string(c.weight) + ")");
+  } else if (!(c.weight > 0 && c.weight <= kMaxConstraintWeight)) {
+    throw InvalidInput(w + "constraint weight must be in (0, 1e100] (got " + std::to_string(c.weight) +
+                       "; its square enters the system, and beyond ~1e150 it overflows: for an exact position use a hard constraint)");
   }
   if (c.rotation && !(c.rotation->allFinite() && std::abs(c.rotation->determinant() - 1.0) < 1e-3 &&
                       (c.rotation->transpose() * *c.rotation - Eigen::Matrix3d::Identity()).norm() < 1e-3))
@@ -250,8 +256,8 @@ void LaplacianDeformer::setLineOrPlane(int id, const Eigen::Vector3d& point, con
 
 void LaplacianDeformer::setWeight(int id, double weight) {
   auto& c = get(constraints_, id, "setWeight");
-  if (!(std::isfinite(weight) && weight > 0))
-    throw InvalidInput("[tbsp::LaplacianDeformer::setWeight] weight must be > 0 and finite (got " + std::to_string(weight) + ")");
+  if (!(weight > 0 && weight <= kMaxConstraintWeight))
+    throw InvalidInput("[tbsp::LaplacianDeformer::setWeight] weight must be in (0, 1e100] (got " + std::to_string(weight) + ")");
   if (c.hard) throw InvalidInput("[tbsp::LaplacianDeformer::setWeight] constraint " + std::to_string(id) + " is hard");
   if (c.weight != weight) { c.weight = weight; cache_->matrix_valid = false; }
 }

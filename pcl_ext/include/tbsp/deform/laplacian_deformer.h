@@ -35,7 +35,7 @@
 /// genus, with degenerate faces (clamped Laplacian), isolated vertices (kept where they
 /// are), non-manifold edges (the Laplacian sums over all incident faces; a warning is logged).
 /// Rejects (InvalidInput): duplicate faces, constraints on missing
-/// vertices/faces, bad barycentric coordinates, non-finite targets or weights ≤ 0, and
+/// vertices/faces, bad barycentric coordinates, non-finite targets, weights outside (0, 1e100], and
 /// constraint sets that leave a component free to translate (the system would be singular).
 
 #include <Eigen/Core>
@@ -74,7 +74,7 @@ struct DeformConstraint {
   ConstraintType type = ConstraintType::Position;
   Eigen::Vector3d target = Eigen::Vector3d::Zero();
   Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
-  double weight = 1.0;           ///< w_j of eq. 3.8 (soft constraints only)
+  double weight = 1.0;           ///< w_j of eq. 3.8 (soft constraints only), in (0, 1e100]
   bool hard = false;             ///< exact; only for Position on a vertex
   std::optional<Eigen::Matrix3d> rotation;  ///< user-given local rotation (rotation field node)
   /// Handle group (default −1: none). Position constraints with the same group ≥ 0 form one
