@@ -168,7 +168,7 @@ void LaplacianDeformer::checkConstraint(const DeformConstraint& c, const char* w
       throw InvalidInput(w + "hard constraints must be position constraints on a vertex; use a soft constraint "
                              "with a large weight for lines, planes and surface points");
   } else if (!(c.weight > 0 && c.weight <= kMaxConstraintWeight)) {
-    throw InvalidInput(w + "constraint weight must be in (0, 1e100] (got " + std::to_string(c.weight) +
+    throw InvalidInput(w + "constraint weight must be in (0, 1e100] (got " + fmt::format("{}", c.weight) +
                        "; its square enters the system, and beyond ~1e150 it overflows: for an exact position use a hard constraint)");
   }
   if (c.rotation && !(c.rotation->allFinite() && std::abs(c.rotation->determinant() - 1.0) < 1e-3 &&
@@ -257,7 +257,7 @@ void LaplacianDeformer::setLineOrPlane(int id, const Eigen::Vector3d& point, con
 void LaplacianDeformer::setWeight(int id, double weight) {
   auto& c = get(constraints_, id, "setWeight");
   if (!(weight > 0 && weight <= kMaxConstraintWeight))
-    throw InvalidInput("[tbsp::LaplacianDeformer::setWeight] weight must be in (0, 1e100] (got " + std::to_string(weight) + ")");
+    throw InvalidInput("[tbsp::LaplacianDeformer::setWeight] weight must be in (0, 1e100] (got " + fmt::format("{}", weight) + ")");
   if (c.hard) throw InvalidInput("[tbsp::LaplacianDeformer::setWeight] constraint " + std::to_string(id) + " is hard");
   if (c.weight != weight) { c.weight = weight; cache_->matrix_valid = false; }
 }
