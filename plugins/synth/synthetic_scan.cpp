@@ -169,7 +169,7 @@ namespace {
 
 // Options a scenario cannot be made from: an InvalidInput naming the option, its value and the
 // range (the CLI's synth-scan passes them straight through).
-void check_options(const ScenarioOptions& o) {
+void check_scenario_options(const ScenarioOptions& o) {
   const std::string who = "synth::make_scenario: ";
   auto bad = [&](const std::string& what, double v, const std::string& range) {
     throw InvalidInput(who + what + " = " + std::to_string(v) + " is out of range; use " + range);
@@ -191,7 +191,7 @@ void check_options(const ScenarioOptions& o) {
 }  // namespace
 
 Scenario make_scenario(const TriMesh& templ, const ScenarioOptions& o) {
-  check_options(o);
+  check_scenario_options(o);
   if (templ.F.rows() == 0) throw InvalidInput("synth::make_scenario: the mesh has no faces; a scan is sampled from its surface");
   Scenario s;
   s.templ = templ;
