@@ -32,13 +32,9 @@
 namespace tbsp {
 
 namespace {
+
 // weights enter the normal equations squared: 1e100² is far from overflow, ~1e154² is not
 constexpr double kMaxConstraintWeight = 1e100;
-}  // namespace
-
-namespace {
-
-
 
 // Two unit vectors orthogonal to d (and to each other).
 void orthonormal_pair(const Eigen::Vector3d& d, Eigen::Vector3d& n1, Eigen::Vector3d& n2) {
