@@ -4,6 +4,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <sstream>
 #include <nlohmann/json.hpp>
 
 #include "command.h"
@@ -192,6 +193,12 @@ int cmd_convert(const ConvertArgs& a) {
 }
 
 int cmd_render(const RenderArgs& a) {
+  // (found by hand 2026-12-06: LO > HI painted every vertex the LO colour under an inverted bar)
+  if (a.range.size() == 2 && !(a.range[0] < a.range[1])) {
+    std::ostringstream msg;
+    msg << "--range " << a.range[0] << " " << a.range[1] << ": give LO < HI (the colour bar runs from LO to HI)";
+    throw tbsp::InvalidInput(msg.str());
+  }
   std::vector<tbsp::RenderPanel> panels;
   for (const auto& m : a.meshes) panels.push_back(render_panel(m, a.color_by, a.scalar, a.range));
   tbsp::RenderOptions o;

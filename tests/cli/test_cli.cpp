@@ -237,6 +237,12 @@ TEST(Cli, RenderDrawsPointCloudsWithAColourBar) {
   r = run_cli("render " + in + " --scalar " + (dir / "short.txt").string() + " --out " + png, dir);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("2 values for the 642 points"), std::string::npos) << r.err;
+  // a colour bar range with LO >= HI (it painted everything the LO colour)
+  const auto before = std::filesystem::file_size(png);
+  r = run_cli("render " + in + " --scalar " + (dir / "s.txt").string() + " --range 1 0 --out " + png, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--range 1 0: give LO < HI"), std::string::npos) << r.err;
+  EXPECT_EQ(std::filesystem::file_size(png), before);
   std::filesystem::remove_all(dir);
 }
 
