@@ -54,7 +54,13 @@ int cmd_fit(FitArgs a) {
     fit.setParameters(a.p);
     fit.setRegionOfInterest(roi);
     fit.setProgressCallback(bar.callback());
-    rep = fit.reconstruct(out);
+    try {
+      rep = fit.reconstruct(out);
+    } catch (const tbsp::InvalidInput& e) {
+      // the library names the item (markers[3], the cloud's normals, ...); the files are the CLI's
+      throw tbsp::InvalidInput("fitting " + a.templ + " to " + a.cloud + (a.markers.empty() ? "" : " with " + a.markers) + ": " +
+                               e.what());
+    }
     status = fit.getVertexStatus();
   };
   if (has_normals) {
