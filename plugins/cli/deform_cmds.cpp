@@ -51,7 +51,12 @@ int cmd_deform(const DeformArgs& a) {
   if (job.constraints.empty())
     throw tbsp::InvalidInput(a.constraints + ": no constraints; at least one position constraint is needed");
   tbsp::DeformReport rep;
-  const tbsp::TriMesh out = run_deform(mesh, job, a.rotation_field, a.uniform, a.scale, a.quiet, rep);
+  tbsp::TriMesh out;
+  try {
+    out = run_deform(mesh, job, a.rotation_field, a.uniform, a.scale, a.quiet, rep);
+  } catch (const tbsp::InvalidInput& e) {
+    throw tbsp::InvalidInput("deforming " + a.mesh + " with " + a.constraints + ": " + e.what());  // the files, with the library's item
+  }
   // crossings the deformation made: counted on the input and the output (exact predicates; -1
   // where the mesh is not a consistently oriented manifold)
   int cross_in = -1, cross_out = -1;

@@ -198,6 +198,7 @@ TEST(CliRobustness, MeshWithoutAreaIsRejected) {
   CliResult r = run_cli("deform --mesh " + mesh + " --constraints " + test::sample("bend_90.json") + " --out " + (dir / "d.ply").string(), dir);
   EXPECT_EQ(r.code, 2) << r.err;
   EXPECT_NE(r.err.find("every face has zero area"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("deforming " + mesh + " with " + test::sample("bend_90.json") + ": "), std::string::npos) << r.err;
   r = run_cli("fit --template " + mesh + " --cloud " + kScan + " --markers " + kMarkers + " --out " + (dir / "f.ply").string(), dir);
   EXPECT_EQ(r.code, 2) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir / "d.ply"));
