@@ -88,6 +88,8 @@ int cmd_replay(const ReplayArgs& a) {
   const fs::path in(a.input);
   std::error_code ec;
   if (!fs::exists(in, ec)) throw FileError("'" + a.input + "': no such file or folder");
+  if (a.last >= 0 && a.first > a.last)
+    throw InvalidInput("--first " + std::to_string(a.first) + " is after --last " + std::to_string(a.last) + "; no frame would be replayed");
   if (!a.out.empty()) fs::create_directories(a.out, ec);
   auto out_path = [&](int i) {
     return (fs::path(a.out) / ("cloud_" + expand_frame_pattern("%04d", i) + "." + a.format)).string();
@@ -175,8 +177,14 @@ int cmd_replay(const ReplayArgs& a) {
     DepthIntrinsics K;
     char c1, c2, c3;
     std::istringstream is(a.intrinsics);
-    if (a.intrinsics.empty() || !(is >> K.fx >> c1 >> K.fy >> c2 >> K.cx >> c3 >> K.cy) || c1 != ',' || c2 != ',' || c3 != ',')
+    if (a.intrinsics.empty())
       throw InvalidInput("a depth-image folder needs --intrinsics fx,fy,cx,cy (pixels), e.g. --intrinsics 525,525,319.5,239.5");
+    std::string rest;
+    if (!(is >> K.fx >> c1 >> K.fy >> c2 >> K.cx >> c3 >> K.cy) || c1 != ',' || c2 != ',' || c3 != ',' || (is >> rest))
+      throw InvalidInput("--intrinsics '" + a.intrinsics + "': expected four numbers fx,fy,cx,cy (pixels), e.g. 525,525,319.5,239.5");
+    if (a.first >= static_cast<int>(files.size()))
+      throw InvalidInput("--first " + std::to_string(a.first) + " is beyond the " + std::to_string(files.size()) + " depth images of '" +
+                         a.input + "' (frames 0.." + std::to_string(files.size() - 1) + ")");
     std::cout << a.input << ": " << files.size() << " depth images\n";
     int n = 0;
     for (std::size_t k = 0; k < files.size(); ++k) {

@@ -55,6 +55,17 @@ TEST(CliCapture, ReplayRecordingsToClouds) {
   r = run_cli("replay " + depth + " --intrinsics 481.2,-480,319.5,239.5 --depth-scale 0.0002 --format ply --out " + (dir / "d").string(), dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(std::filesystem::exists(dir / "d" / "cloud_0004.ply"));
+  // malformed intrinsics are named as such; a frame range that selects nothing is an error, not
+  // "0 frames converted" with exit 0 (found by hand 2026-12-06)
+  r = run_cli("replay " + depth + " --intrinsics 481.2,480,319.5", dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--intrinsics '481.2,480,319.5': expected four numbers"), std::string::npos) << r.err;
+  r = run_cli("replay " + depth + " --intrinsics 481.2,-480,319.5,239.5 --first 3 --last 1", dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--first 3 is after --last 1"), std::string::npos) << r.err;
+  r = run_cli("replay " + depth + " --intrinsics 481.2,-480,319.5,239.5 --first 500", dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--first 500 is beyond the 5 depth images"), std::string::npos) << r.err;
   // Empty recording: clear error, exit 2.
   r = run_cli("replay " + test::shared("capture/bloyot__Kinect-Gesture-Recognition/recording.oni"), dir);
   EXPECT_EQ(r.code, 2);
