@@ -6,6 +6,7 @@
 #include <cmath>
 #include <numeric>
 #include <random>
+#include <sstream>
 #include <string>
 
 #include "tbsp/core/error.h"
@@ -172,7 +173,9 @@ namespace {
 void check_scenario_options(const ScenarioOptions& o) {
   const std::string who = "synth::make_scenario: ";
   auto bad = [&](const std::string& what, double v, const std::string& range) {
-    throw InvalidInput(who + what + " = " + std::to_string(v) + " is out of range; use " + range);
+    std::ostringstream value;  // 1e+300, not 300 digits
+    value << v;
+    throw InvalidInput(who + what + " = " + value.str() + " is out of range; use " + range);
   };
   if (o.hole_axis < 0 || o.hole_axis > 2)
     throw InvalidInput(who + "hole_axis " + std::to_string(o.hole_axis) + " is not 0, 1 or 2 (a principal axis)");
