@@ -306,6 +306,15 @@ TEST(TetDeformerErrors, BadInputGivesClearErrors) {
   TetMesh flat = bar;
   flat.V.row(flat.T(0, 3)) = flat.V.row(flat.T(0, 0));
   expect_error([&] { TetDeformer d; d.setMesh(flat); }, "degenerate");
+  // a handle target far beyond the mesh: the energies overflow (found by hand 2026-12-06:
+  // `tbsp tetdeform` wrote the result with E_nonrigid inf, exit 0)
+  {
+    TetDeformer d;
+    d.setMesh(bar);
+    d.addVertexHandle(0, bar.V.row(0).transpose());
+    d.addVertexHandle(int(bar.V.rows()) - 1, bar.V.row(bar.V.rows() - 1).transpose() + Eigen::Vector3d(1e300, 0, 0));
+    EXPECT_THROW(d.deform(5), NumericalFailure);
+  }
 }
 
 // Thesis Fig. 8.3 made measurable: the three handle edits on the bar, tet deformer against the

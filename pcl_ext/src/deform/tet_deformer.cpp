@@ -503,6 +503,12 @@ Eigen::MatrixX3d TetDeformer::deform(int max_iterations) {
     for (std::size_t k = 0; k < h.vertices.size(); ++k)
       res = std::max(res, (X_.row(h.vertices[k]).transpose() - handlePosition(h, int(k), 1.0)).norm());
   report_.max_handle_residual = res;
+  // handle targets far beyond the mesh (a translation of 1e300) overflow the energies while the
+  // positions stay finite: not a deformation to hand out (found by hand 2026-12-06)
+  if (!X_.allFinite() || (!report_.e_nonrigid.empty() && !std::isfinite(report_.e_nonrigid.back())) ||
+      !std::isfinite(report_.volume_ratio))
+    throw NumericalFailure("[tbsp::TetDeformer::deform] the deformation overflowed double precision (E_nonrigid or the volume is "
+                           "not finite): the handle targets lie far beyond the mesh's size; check their units");
   return inputPositions();
 }
 

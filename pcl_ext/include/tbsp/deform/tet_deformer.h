@@ -172,6 +172,8 @@ public:
   double iterate();
   /// \brief Iterates until converged (see TetDeformerOptions::tolerance) or max_iterations.
   /// \returns the positions of the input vertices.
+  /// \throws NumericalFailure when the result overflowed (non-finite positions, E_nonrigid or
+  /// volume: handle targets far beyond the mesh's size).
   Eigen::MatrixX3d deform(int max_iterations = 100);
 
   /// Current positions of all working-mesh vertices.
