@@ -4,7 +4,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
-#include <sstream>
+#include <spdlog/fmt/fmt.h>
 #include <nlohmann/json.hpp>
 
 #include "command.h"
@@ -194,11 +194,8 @@ int cmd_convert(const ConvertArgs& a) {
 
 int cmd_render(const RenderArgs& a) {
   // (found by hand 2026-12-06: LO > HI painted every vertex the LO colour under an inverted bar)
-  if (a.range.size() == 2 && !(a.range[0] < a.range[1])) {
-    std::ostringstream msg;
-    msg << "--range " << a.range[0] << " " << a.range[1] << ": give LO < HI (the colour bar runs from LO to HI)";
-    throw tbsp::InvalidInput(msg.str());
-  }
+  if (a.range.size() == 2 && !(a.range[0] < a.range[1]))
+    throw tbsp::InvalidInput(fmt::format("--range {} {}: give LO < HI (the colour bar runs from LO to HI)", a.range[0], a.range[1]));
   std::vector<tbsp::RenderPanel> panels;
   for (const auto& m : a.meshes) panels.push_back(render_panel(m, a.color_by, a.scalar, a.range));
   tbsp::RenderOptions o;

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <numeric>
 #include <random>
-#include <sstream>
+#include <spdlog/fmt/fmt.h>
 #include <string>
 
 #include "tbsp/core/error.h"
@@ -173,9 +173,7 @@ namespace {
 void check_scenario_options(const ScenarioOptions& o) {
   const std::string who = "synth::make_scenario: ";
   auto bad = [&](const std::string& what, double v, const std::string& range) {
-    std::ostringstream value;  // 1e+300, not 300 digits
-    value << v;
-    throw InvalidInput(who + what + " = " + value.str() + " is out of range; use " + range);
+    throw InvalidInput(fmt::format("{}{} = {} is out of range; use {}", who, what, v, range));  // 1e+300, not 300 digits
   };
   if (o.hole_axis < 0 || o.hole_axis > 2)
     throw InvalidInput(who + "hole_axis " + std::to_string(o.hole_axis) + " is not 0, 1 or 2 (a principal axis)");

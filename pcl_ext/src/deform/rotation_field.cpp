@@ -120,8 +120,7 @@ std::vector<Eigen::Matrix3d> node_rotations(const ConstraintGraph& graph, const 
 
 void RotationField::compute(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::vector<int>& nodes,
                             std::vector<int> tree_parent, std::vector<int> tree_order, LaplacianWeights weights) {
-  compute(weights == LaplacianWeights::Cotangent ? cotangent_matrix(V, F) : uniform_graph_laplacian(F, V.rows()), F,
-          nodes, std::move(tree_parent), std::move(tree_order));
+  compute(laplacian_stiffness(V, F, weights), F, nodes, std::move(tree_parent), std::move(tree_order));
 }
 
 void RotationField::compute(const Eigen::SparseMatrix<double>& C, const Eigen::MatrixX3i& F, const std::vector<int>& nodes,

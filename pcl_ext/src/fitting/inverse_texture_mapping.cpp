@@ -12,7 +12,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
-#include <sstream>
+#include <spdlog/fmt/fmt.h>
 #include <string>
 
 #include "tbsp/core/error.h"
@@ -69,12 +69,10 @@ TextureMappingResult InverseTextureMapping::compute() const {
   const Eigen::MatrixX3i& F = mesh_.F;
   const long nv = V.rows();
   const double diag = bbox_diagonal(V);
-  if (std::abs(o.normal_offset) > diag) {
-    std::ostringstream msg;
-    msg << who << " normal_offset = " << o.normal_offset << " is beyond the mesh's size (bbox diagonal " << diag
-        << "); a draping offset is a small fraction of it (a cloth's distance from the body)";
-    throw InvalidInput(msg.str());
-  }
+  if (std::abs(o.normal_offset) > diag)
+    throw InvalidInput(fmt::format("{} normal_offset = {} is beyond the mesh's size (bbox diagonal {}); a draping offset is a small "
+                                   "fraction of it (a cloth's distance from the body)",
+                                   who, o.normal_offset, diag));
   std::vector<Eigen::Vector3d> at(static_cast<std::size_t>(k));  // each constraint's mesh point
   for (int c = 0; c < k; ++c) {
     const TextureConstraint& tc = constraints_[c];

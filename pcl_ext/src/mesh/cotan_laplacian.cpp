@@ -166,15 +166,18 @@ Eigen::SparseMatrix<double> uniform_graph_laplacian(const Eigen::MatrixX3i& F, E
   return G + D;
 }
 
+Eigen::SparseMatrix<double> laplacian_stiffness(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, LaplacianWeights weights) {
+  return weights == LaplacianWeights::Cotangent ? cotangent_matrix(V, F) : uniform_graph_laplacian(F, V.rows());
+}
+
 Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, LaplacianWeights weights,
                                       double sliver_guard, Eigen::SparseMatrix<double>* stiffness) {
   if (!(sliver_guard >= 0 && std::isfinite(sliver_guard)))
     throw InvalidInput("[tbsp::laplacian] sliver_guard must be >= 0 and finite (0: off)");
   const Eigen::Index n = V.rows();
-  Eigen::SparseMatrix<double> K;
+  Eigen::SparseMatrix<double> K = laplacian_stiffness(V, F, weights);
   Eigen::VectorXd scale(n);
   if (weights == LaplacianWeights::Cotangent) {
-    K = cotangent_matrix(V, F);
     Eigen::VectorXd A = voronoi_areas(V, F);
     double sum = 0;
     Eigen::Index cnt = 0;
@@ -199,7 +202,6 @@ Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::Ma
     }
     for (Eigen::Index i = 0; i < n; ++i) scale(i) = 1.0 / std::max(A(i), floor);
   } else {
-    K = uniform_graph_laplacian(F, n);
     for (Eigen::Index i = 0; i < n; ++i) {
       const double deg = -K.coeff(i, i);
       scale(i) = deg > 0 ? 1.0 / deg : 0.0;

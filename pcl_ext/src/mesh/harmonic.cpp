@@ -9,8 +9,7 @@ namespace tbsp {
 
 void HarmonicInterpolator::compute(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
                                    const std::vector<int>& constrained, LaplacianWeights weights) {
-  compute(weights == LaplacianWeights::Cotangent ? cotangent_matrix(V, F) : uniform_graph_laplacian(F, V.rows()), F,
-          constrained);
+  compute(laplacian_stiffness(V, F, weights), F, constrained);
 }
 
 void HarmonicInterpolator::compute(const Eigen::SparseMatrix<double>& C, const Eigen::MatrixX3i& F,

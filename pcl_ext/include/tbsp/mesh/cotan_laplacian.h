@@ -49,6 +49,10 @@ Eigen::VectorXd voronoi_areas(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i&
 /// \brief Uniform graph Laplacian (symmetric): off-diagonal 1 per edge, diagonal −degree.
 Eigen::SparseMatrix<double> uniform_graph_laplacian(const Eigen::MatrixX3i& F, Eigen::Index num_vertices);
 
+/// \brief The symmetric matrix a Laplacian's rows are scaled from: cotangent_matrix(V, F) for
+/// cotangent weights, uniform_graph_laplacian(F, #V) for uniform ones. O(#F).
+Eigen::SparseMatrix<double> laplacian_stiffness(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, LaplacianWeights weights);
+
 /// \brief The Laplacian of eq. 3.2 as a #V by #V matrix (rows sum to 0, not symmetric):
 /// cotangent: L = M⁻¹ C with M = diag(2 · voronoi_areas) so that w_ij = (cot α + cot β)/(2 A_i);
 /// uniform: L = D⁻¹ G (G the graph Laplacian, D the degrees).
@@ -62,7 +66,7 @@ Eigen::SparseMatrix<double> uniform_graph_laplacian(const Eigen::MatrixX3i& F, E
 /// least-squares system by orders of magnitude. The fitter's Laplacian updating uses 0.1 (its
 /// intermediate meshes can have slivers).
 /// \param stiffness if not null, receives the symmetric matrix the rows are scaled from:
-/// cotangent_matrix(V, F) or uniform_graph_laplacian(F, #V), the same bits as those calls
+/// laplacian_stiffness(V, F, weights), the same bits
 /// (for a harmonic system on the same mesh, HarmonicInterpolator::compute, without building
 /// it twice).
 Eigen::SparseMatrix<double> laplacian(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F,
