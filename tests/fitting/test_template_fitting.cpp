@@ -1,12 +1,14 @@
 // TemplateFitting<PointT> front end and bad input.
 #include <gtest/gtest.h>
 #include <cstdio>
+#include <omp.h>
 
 #include <Eigen/Geometry>
 #include <pcl/point_types.h>
 
 #include "test_util.h"
 #include "tbsp/core/error.h"
+#include "tbsp/fitting/template_fitter.h"
 #include "tbsp/fitting/template_fitting.h"
 #include "tbsp/mesh/primitives.h"
 
@@ -221,4 +223,68 @@ TEST(BsplineWeight, IsTheC1QuadraticKernel) {
   for (double t : {0.5, 1.0 - 1e-9})
     EXPECT_NEAR((bspline_weight(t + h) - bspline_weight(t - h)) / (2 * h), t < 0.9 ? -2.0 : 0.0, 1e-4);
   EXPECT_NEAR((bspline_weight(h) - bspline_weight(0)) / h, 0.0, 1e-5);
+}
+
+// Without markers the coarse stage's hypotheses are independent fits of the same template to
+// the same cloud; with more than one thread they run side by side (template_fitter.cpp). The
+// kept fit must be the one a single thread finds, bit for bit; progress stays in [0, 1] and
+// never goes back; cancelling from the progress callback stops every hypothesis and leaves the
+// result untouched.
+TEST(TemplateFitting, HypothesesSideBySideGiveTheFitOfOneThread) {
+  const auto c = ellipsoid_cloud<pcl::PointNormal>(2000);
+  Eigen::MatrixX3d P(Eigen::Index(c->size()), 3), N(Eigen::Index(c->size()), 3);
+  for (std::size_t i = 0; i < c->size(); ++i) {
+    P.row(Eigen::Index(i)) << (*c)[i].x, (*c)[i].y, (*c)[i].z;
+    N.row(Eigen::Index(i)) << (*c)[i].normal_x, (*c)[i].normal_y, (*c)[i].normal_z;
+  }
+  TriMesh t = make_icosphere(3, 1.0);  // 642 vertices, roughly in place: turned by 6°, 3 % off
+  t.V = (t.V * Eigen::AngleAxisd(6 * M_PI / 180, Eigen::Vector3d(1, 2, 0).normalized()).toRotationMatrix().transpose()).eval();
+  t.V.rowwise() += Eigen::RowVector3d(0.03, -0.02, 0.0);
+  FitParameters p;
+  p.coarse_nodes = 80;
+  p.coarse_prepass_nodes = {20, 40};
+  p.max_iterations = 5;
+  const int threads = omp_get_max_threads();
+  auto fit = [&](int n, TriMesh& out, const ProgressCallback& progress = {}) {
+    omp_set_num_threads(n);
+    std::vector<VertexStatus> st;
+    try {
+      const FitReport r = fit_template(t, P, N, {}, RegionOfInterest{}, p, out, st, progress);
+      omp_set_num_threads(threads);
+      return r;
+    } catch (...) {
+      omp_set_num_threads(threads);
+      throw;
+    }
+  };
+  TriMesh one, two;
+  const FitReport r1 = fit(1, one);
+  std::vector<double> fractions;
+  const FitReport r2 = fit(2, two, [&](double f, const std::string&) {
+    fractions.push_back(f);
+    return true;
+  });
+  ASSERT_EQ(r1.coarse_hypotheses, 3);
+  ASSERT_EQ(r2.coarse_hypotheses, 3);
+  EXPECT_NE(r2.message.find("side by side on 3 threads"), std::string::npos) << r2.message;
+  EXPECT_EQ(r1.message.find("side by side"), std::string::npos) << r1.message;  // one thread: one after the other
+  EXPECT_EQ(r1.coarse_kept, r2.coarse_kept);
+  EXPECT_EQ(r1.coarse_scores, r2.coarse_scores);
+  ASSERT_EQ(one.V.rows(), two.V.rows());
+  EXPECT_EQ((one.V - two.V).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_LT(r1.tail_mean, 0.05);  // it did fit: the ellipsoid's diagonal is ~3.5
+  ASSERT_GT(fractions.size(), 10u);
+  for (std::size_t i = 0; i < fractions.size(); ++i) {
+    EXPECT_GE(fractions[i], 0.0);
+    EXPECT_LE(fractions[i], 1.0 + 1e-12);
+    if (i > 0) {
+      EXPECT_GE(fractions[i], fractions[i - 1] - 1e-12) << i;
+    }
+  }
+  // cancelled half-way through: Cancelled, the output as it was
+  TriMesh kept = one;
+  int calls = 0;
+  EXPECT_THROW(fit(2, kept, [&](double, const std::string&) { return ++calls < int(fractions.size() / 2); }), Cancelled);
+  EXPECT_EQ((kept.V - one.V).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(omp_get_max_threads(), threads);
 }

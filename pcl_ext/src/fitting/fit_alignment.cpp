@@ -21,25 +21,29 @@ namespace fit_impl {
 // the pairs (outliers, parts of the scene the template does not model) are dropped each
 // iteration. At most 20k cloud points (a fixed stride: deterministic) and 60 iterations; stops
 // when the transform changes the template by less than 1e-6 of the cloud diagonal.
+SimilarityIcpResult similarity_alignment(const PreparedCloud& c, const Eigen::MatrixX3d& V) {
+  Eigen::Index n_roi = 0;
+  for (Eigen::Index i = 0; i < c.np; ++i) n_roi += c.roi_ok[std::size_t(i)];
+  Eigen::MatrixX3d cloud(n_roi, 3);
+  for (Eigen::Index i = 0, k = 0; i < c.np; ++i)
+    if (c.roi_ok[std::size_t(i)]) cloud.row(k++) = c.P.row(i);
+  SimilarityIcpOptions io;
+  io.trim = 0.1;
+  io.max_iterations = 60;
+  io.tolerance = 1e-6 * c.diag;
+  io.max_points = 20000;
+  io.stall_iterations = 0;  // as measured in docs/fitting.md
+  return similarity_icp(V, cloud, io);
+}
+
 void align_without_markers(FitState& s, TriMesh& aligned) {
   const auto t0 = Clock::now();
   FitReport& rep = s.rep;
   const TriMesh& rest = s.templ();
-  Eigen::Index n_roi = 0;
-  for (Eigen::Index i = 0; i < s.cloud.np; ++i) n_roi += s.cloud.roi_ok[std::size_t(i)];
-  Eigen::MatrixX3d cloud(n_roi, 3);
-  for (Eigen::Index i = 0, k = 0; i < s.cloud.np; ++i)
-    if (s.cloud.roi_ok[std::size_t(i)]) cloud.row(k++) = s.cloud.P.row(i);
-  SimilarityIcpOptions io;
-  io.trim = 0.1;
-  io.max_iterations = 60;
-  io.tolerance = 1e-6 * s.cloud.diag;
-  io.max_points = 20000;
-  io.stall_iterations = 0;  // as measured in docs/fitting.md
   // the same template and cloud give the same alignment: computed once per fit_template call
   std::optional<SimilarityIcpResult> local;
   std::optional<SimilarityIcpResult>& cache = s.alignment_cache ? *s.alignment_cache : local;
-  if (!cache) cache = similarity_icp(rest.V, cloud, io);
+  if (!cache) cache = similarity_alignment(s.cloud, rest.V);
   const SimilarityIcpResult& r = *cache;
   const Eigen::Matrix4d T = r.transform;
   const int it = r.iterations;

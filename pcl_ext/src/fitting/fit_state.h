@@ -124,6 +124,9 @@ void prepare_markers(FitState& s, const Eigen::MatrixX3d& P_in, const RegionOfIn
 /// Without markers: similarity alignment of s.templ() to the cloud by trimmed ICP (cloud ->
 /// template, Umeyama); writes the aligned template and the report's alignment fields.
 void align_without_markers(FitState& s, TriMesh& aligned);
+/// The similarity alignment of the template vertices V to the cloud's ROI points that
+/// align_without_markers applies (FitState::alignment_cache holds it once computed).
+SimilarityIcpResult similarity_alignment(const PreparedCloud& c, const Eigen::MatrixX3d& V);
 
 // ---- fit_initial.cpp
 /// Stage 1: initial deformation from the markers, global scale; sets V, V0, F; freezes the field.

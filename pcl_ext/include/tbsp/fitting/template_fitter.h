@@ -151,8 +151,9 @@ struct FitParameters {
   /// a graph of that many nodes fitted first (regions the size of a head or a limb turn as wholes
   /// towards the data), then the coarse_nodes graph from there; the fit closest to the cloud is
   /// kept: the lowest mean of the largest 1 % of the cloud → fit distances (FitReport::tail_mean;
-  /// ties keep the earlier hypothesis). Each hypothesis costs one fit without markers; unused with
-  /// markers (they pose the parts). Default {100, 200} (three hypotheses). Each entry in
+  /// ties keep the earlier hypothesis). Each hypothesis costs one fit without markers; with more
+  /// than one OpenMP thread allowed they run side by side, one thread each (the same result as one
+  /// after the other; about one fit's memory each); unused with markers (they pose the parts). Default {100, 200} (three hypotheses). Each entry in
   /// 4..20000; entries not below coarse_nodes and repeated entries are skipped; empty: one hypothesis.
   std::vector<int> coarse_prepass_nodes = {100, 200};
   /// Rounds of the coarse stage: stiffness and radius fall geometrically over them. Default 5. 1..100.
@@ -323,7 +324,9 @@ struct FitReport {
 /// trimmed ICP, FitReport::alignment), then fitted with the matches alone.
 /// \param roi what is excluded from matching (template vertices, cloud points).
 /// \param params the parameters (validated: FitParameters::isValid); the values used are in the report.
-/// \param progress called with (fraction, stage); returning false cancels (tbsp::Cancelled).
+/// \param progress called with (fraction, stage); returning false cancels (tbsp::Cancelled). A fit
+/// without markers whose hypotheses run side by side calls it from their threads, one call at a
+/// time (serialised), with the mean of their fractions.
 /// \param orient_normals orient given normals by the posed template too.
 /// \param[out] result fitted mesh (template connectivity unless remeshing)
 /// \param[out] status per result vertex
