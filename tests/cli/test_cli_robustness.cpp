@@ -13,6 +13,7 @@
 #include "test_util.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/mocap_io.h"
+#include "tbsp/mesh/primitives.h"
 
 using namespace tbsp;
 
@@ -72,6 +73,53 @@ TEST(CliRobustness, FitWithAFarOutlierOrAFarFreeMarkerFinishes) {
           dir);
   EXPECT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("outside the cloud's bounding box"), std::string::npos) << r.out;
+  std::filesystem::remove_all(dir);
+}
+
+// Found by hand (2026-12-06): a fit in which no template vertex reached the cloud (a template
+// without markers 10^6 units from its scan (the similarity ICP's first step degenerates); markers whose positions are all off the
+// cloud) wrote the template as posed and exited 0. Now exit 2 with both bounding boxes and the
+// fix; an existing output stays as it was.
+TEST(CliRobustness, AFitThatMatchesNoVertexIsAnError) {
+  const auto dir = test::temp_dir("rob_nomatch");
+  write_mesh((dir / "sphere.ply").string(), make_icosphere(3, 1.0));
+  TriMesh cloud = make_icosphere(4, 1.0);
+  cloud.N = cloud.V;
+  cloud.V.col(0).array() += 1e6;
+  cloud.F.resize(0, 3);
+  write_mesh((dir / "far.ply").string(), cloud);
+  std::ofstream(dir / "fit.ply") << "keep me";
+  CliResult r = run_cli("fit -q --template " + (dir / "sphere.ply").string() + " --cloud " + (dir / "far.ply").string() + " --out " +
+                            (dir / "fit.ply").string(),
+                        dir);
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("no template vertex matched the cloud"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("the template as the alignment posed it"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("move it there or give markers"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("far.ply"), std::string::npos) << r.err;
+  EXPECT_TRUE(slurp((dir / "fit.ply").string()) == "keep me");
+  // markers at positions 10^6 units off the scan pull the template away from it
+  TriMesh scan = read_mesh(kScan);
+  scan.V.col(0).array() += 1e6;
+  write_mesh((dir / "barfar.ply").string(), scan);
+  nlohmann::json mk = nlohmann::json::parse(slurp(kMarkers));
+  for (auto& m : mk["markers"]) {
+    const auto i = m["cloud_index"].get<Eigen::Index>();
+    m.erase("cloud_index");
+    m["position"] = {scan.V(i, 0), scan.V(i, 1), scan.V(i, 2)};
+  }
+  std::ofstream(dir / "off.json") << mk.dump();
+  r = run_cli("fit -q --template " + kTemplate + " --cloud " + kScan + " --markers " + (dir / "off.json").string() + " --out " +
+                  (dir / "fit.ply").string(),
+              dir);
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("the template as the markers posed it"), std::string::npos) << r.err;
+  EXPECT_TRUE(slurp((dir / "fit.ply").string()) == "keep me");
+  // the same markers on the moved scan: a fit
+  r = run_cli("fit -q --template " + kTemplate + " --cloud " + (dir / "barfar.ply").string() + " --markers " + (dir / "off.json").string() +
+                  " --out " + (dir / "fit.ply").string(),
+              dir);
+  EXPECT_EQ(r.code, 0) << r.err;
   std::filesystem::remove_all(dir);
 }
 

@@ -288,3 +288,42 @@ TEST(TemplateFitting, HypothesesSideBySideGiveTheFitOfOneThread) {
   EXPECT_EQ((kept.V - one.V).cwiseAbs().maxCoeff(), 0.0);
   EXPECT_EQ(omp_get_max_threads(), threads);
 }
+
+// A fit in which no template vertex matched the cloud is the template as the markers or the
+// alignment posed it: InvalidInput naming both bounding boxes, the output untouched (unless no
+// iteration was asked for: then the posed template is the result). An alignment far beyond
+// "roughly in place" (here a 3× scale) is fitted but warned about in the report.
+TEST(TemplateFittingBadInput, AFitThatMatchesNoVertexIsAnErrorAndAWildAlignmentAWarning) {
+  const auto c = ellipsoid_cloud<pcl::PointNormal>(2000);
+  Eigen::MatrixX3d P(Eigen::Index(c->size()), 3), N(Eigen::Index(c->size()), 3);
+  for (std::size_t i = 0; i < c->size(); ++i) {
+    P.row(Eigen::Index(i)) << (*c)[i].x, (*c)[i].y, (*c)[i].z;
+    N.row(Eigen::Index(i)) << (*c)[i].normal_x, (*c)[i].normal_y, (*c)[i].normal_z;
+  }
+  const TriMesh t = make_icosphere(3, 1.0);
+  FitParameters p;
+  p.coarse_prepass_nodes = {};  // one hypothesis: quicker
+  p.coarse_nodes = 80;
+  TriMesh out = t;
+  out.V(0, 0) = 42;
+  std::vector<VertexStatus> st;
+  Eigen::MatrixX3d far = P;
+  far.col(0).array() += 1e6;
+  try {
+    fit_template(t, far, N, {}, RegionOfInterest{}, p, out, st);
+    ADD_FAILURE() << "no exception";
+  } catch (const InvalidInput& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("no template vertex matched the cloud"), std::string::npos) << m;
+    EXPECT_NE(m.find("the cloud's at (1e+06"), std::string::npos) << m;
+  }
+  EXPECT_EQ(out.V(0, 0), 42);
+  p.max_iterations = 0;  // the posed template is what was asked for
+  EXPECT_NO_THROW(fit_template(t, far, N, {}, RegionOfInterest{}, p, out, st));
+  p.max_iterations = 5;
+  const FitReport near = fit_template(t, P, N, {}, RegionOfInterest{}, p, out, st);
+  EXPECT_EQ(near.message.find("warning: the alignment"), std::string::npos) << near.message;
+  const FitReport big = fit_template(t, (3.0 * P).eval(), N, {}, RegionOfInterest{}, p, out, st);
+  EXPECT_GT(big.alignment_scale, 2.0);  // the ellipsoid (1.5 x 1 x 0.8) against the unit sphere: ~3.5
+  EXPECT_NE(big.message.find("warning: the alignment turned the template by"), std::string::npos) << big.message;
+}

@@ -3,6 +3,8 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <string>
 #include <optional>
 #include <vector>
 
@@ -36,6 +38,17 @@ SimilarityIcpResult similarity_alignment(const PreparedCloud& c, const Eigen::Ma
   return similarity_icp(V, cloud, io);
 }
 
+std::string alignment_warning(const SimilarityIcpResult& r) {
+  if (r.rotation_deg <= 30 && r.scale >= 2.0 / 3.0 && r.scale <= 1.5) return {};
+  char buf[400];
+  std::snprintf(buf, sizeof buf,
+                "the alignment turned the template by %.1f deg and scaled it by %.4g, far more than for a template roughly "
+                "in place (within ~10 deg and ~5 %%); the fit may have settled in a wrong pose: check it (e.g. its PNG), check the "
+                "units, or give markers. ",
+                r.rotation_deg, r.scale);
+  return buf;
+}
+
 void align_without_markers(FitState& s, TriMesh& aligned) {
   const auto t0 = Clock::now();
   FitReport& rep = s.rep;
@@ -43,7 +56,11 @@ void align_without_markers(FitState& s, TriMesh& aligned) {
   // the same template and cloud give the same alignment: computed once per fit_template call
   std::optional<SimilarityIcpResult> local;
   std::optional<SimilarityIcpResult>& cache = s.alignment_cache ? *s.alignment_cache : local;
-  if (!cache) cache = similarity_alignment(s.cloud, rest.V);
+  if (!cache) {
+    cache = similarity_alignment(s.cloud, rest.V);
+    const std::string w = alignment_warning(*cache);
+    if (!w.empty()) logger()->warn("[TemplateFitting] {}", w);
+  }
   const SimilarityIcpResult& r = *cache;
   const Eigen::Matrix4d T = r.transform;
   const int it = r.iterations;
@@ -61,6 +78,7 @@ void align_without_markers(FitState& s, TriMesh& aligned) {
   rep.t_alignment = seconds_since(t0);
   rep.message += "no markers: the template was aligned to the cloud first (trimmed ICP with scale: " +
                  std::to_string(rep.alignment_rotation_deg) + " deg, scale " + std::to_string(scale) + "). ";
+  if (const std::string w = alignment_warning(r); !w.empty()) rep.message += "warning: " + w;
   logger()->debug("[TemplateFitting] alignment without markers: {} iterations, rotation {:.2f} deg, scale {:.4f}, rms {:.3g}",
                   it, rep.alignment_rotation_deg, scale, rms);
   aligned.V = X;

@@ -127,6 +127,9 @@ void align_without_markers(FitState& s, TriMesh& aligned);
 /// The similarity alignment of the template vertices V to the cloud's ROI points that
 /// align_without_markers applies (FitState::alignment_cache holds it once computed).
 SimilarityIcpResult similarity_alignment(const PreparedCloud& c, const Eigen::MatrixX3d& V);
+/// A warning (text ending in a space) when the alignment turned the template by more than 30° or
+/// scaled it outside [2/3, 1.5]: beyond a template roughly in place; empty otherwise.
+std::string alignment_warning(const SimilarityIcpResult& r);
 
 // ---- fit_initial.cpp
 /// Stage 1: initial deformation from the markers, global scale; sets V, V0, F; freezes the field.

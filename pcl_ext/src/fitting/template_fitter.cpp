@@ -17,6 +17,7 @@
 
 #include "fit_state.h"
 #include "tbsp/core/error.h"
+#include "tbsp/core/logging.h"
 #include "tbsp/core/timer.h"
 #include "tbsp/mesh/mesh_validation.h"
 #include "tbsp/mesh/point_search.h"
@@ -55,6 +56,32 @@ void check_fit_inputs(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const 
                        " points");
 }
 
+// A fit in which no template vertex matched the cloud returns the template as the markers or
+// the alignment posed it: not a fit. Thrown (InvalidInput) with what the user can check.
+void require_a_match(const FitReport& rep, const TriMesh& templ, const Eigen::MatrixX3d& P, bool had_markers) {
+  if (rep.matched > 0 || rep.used.max_iterations == 0) return;
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (Eigen::Index i = 0; i < P.rows(); ++i)
+    if (P.row(i).allFinite()) {
+      lo = lo.cwiseMin(P.row(i).transpose());
+      hi = hi.cwiseMax(P.row(i).transpose());
+    }
+  const Eigen::Vector3d tlo = templ.V.colwise().minCoeff().transpose(), thi = templ.V.colwise().maxCoeff().transpose();
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "no template vertex matched the cloud (none came within r_max = %.4g of a cloud point whose normal is within "
+                "theta_max = %.4g deg of its own), so the result would be the template as %s posed it, not a fit. The template's "
+                "bounding box has its centre at (%.4g, %.4g, %.4g) and a diagonal of %.4g, the cloud's at (%.4g, %.4g, %.4g) and %.4g: ",
+                rep.used.max_match_distance, rep.used.max_normal_angle_deg, had_markers ? "the markers" : "the alignment",
+                0.5 * (tlo + thi).x(), 0.5 * (tlo + thi).y(), 0.5 * (tlo + thi).z(), (thi - tlo).norm(), 0.5 * (lo + hi).x(),
+                0.5 * (lo + hi).y(), 0.5 * (lo + hi).z(), (hi - lo).norm());
+  throw InvalidInput(std::string(fit_impl::kWho) + buf +
+                     (had_markers ? "check that the markers' positions lie on the cloud and that both use the same units"
+                                  : "without markers the template must already lie roughly on the scan (within ~10 deg and ~5 % of its "
+                                    "size) in the same units; move it there or give markers") +
+                     ", or raise max_match_distance / max_normal_angle_deg");
+}
+
 // The part [lo, hi] of `progress` (empty when `progress` is).
 ProgressCallback sub_progress(const ProgressCallback& progress, double lo, double hi) {
   if (!progress) return {};
@@ -71,7 +98,15 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // coarse_nodes −1: the coarse stage when the fit aligns the template itself
   FitParameters params = params_in;
   if (params.coarse_nodes == -1) params.coarse_nodes = markerless && params.align_without_markers ? 400 : 0;
-  if (!markerless) return fit_once(templ, P_in, N_in, markers, roi, params, result, status, progress, orient_normals, 0);
+  if (!markerless) {
+    TriMesh fitted;
+    std::vector<VertexStatus> st;
+    const FitReport rep = fit_once(templ, P_in, N_in, markers, roi, params, fitted, st, progress, orient_normals, 0);
+    require_a_match(rep, templ, P_in, !markers.empty());
+    result = std::move(fitted);
+    status = std::move(st);
+    return rep;
+  }
   const auto t_all = Clock::now();
   // Without markers nothing but nearest points tells the coarse stage where a turned part went,
   // and it can settle in the wrong place; hypotheses whose coarser graphs turn parts as wholes
@@ -83,7 +118,12 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   const std::size_t nh = prepass.size();
   SharedWork shared;  // the same for every pass and hypothesis
   if (nh == 1) {
-    FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, result, status, progress, orient_normals, 0, shared);
+    TriMesh fitted;
+    std::vector<VertexStatus> st;
+    FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, fitted, st, progress, orient_normals, 0, shared);
+    require_a_match(rep, templ, P_in, false);
+    result = std::move(fitted);
+    status = std::move(st);
     rep.t_total = seconds_since(t_all);
     return rep;
   }
@@ -94,7 +134,11 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   check_fit_inputs(templ, P_in, N_in, params);
   const ScopedBlasThreads blas_threads(1);  // before the workers: their own scopes then keep 1
   shared.cloud = fit_impl::prepare_cloud(P_in, N_in, roi, params.normal_neighbours);
-  if (params.align_without_markers) shared.alignment = fit_impl::similarity_alignment(*shared.cloud, templ.V);
+  if (params.align_without_markers) {
+    shared.alignment = fit_impl::similarity_alignment(*shared.cloud, templ.V);
+    const std::string w = fit_impl::alignment_warning(*shared.alignment);
+    if (!w.empty()) logger()->warn("[TemplateFitting] {}", w);
+  }
   std::vector<FitReport> reps(nh);
   std::vector<TriMesh> results(nh);
   std::vector<std::vector<VertexStatus>> statuses(nh);
@@ -174,6 +218,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     if (reps[h].tail_mean < reps[kept].tail_mean) kept = h;  // ties keep the earlier hypothesis
   }
   FitReport rep = std::move(reps[kept]);
+  require_a_match(rep, templ, P_in, false);
   result = std::move(results[kept]);
   status = std::move(statuses[kept]);
   rep.coarse_hypotheses = int(nh);
