@@ -64,15 +64,19 @@ TEST(CliRobustness, FitWithAFarOutlierOrAFarFreeMarkerFinishes) {
                         " --out " + (dir / "a.ply").string(),
                     dir);
   EXPECT_EQ(r.code, 0) << r.err;
-  // a free marker (no cloud point) far outside the data: legal, fitted, and reported
+  // a free marker (no cloud point) far outside the data: warned about; it drags the template off
+  // the scan (the global scale follows it), so nothing matches: an error since 2026-12-06 (it
+  // wrote that posed template with exit 0 before)
   nlohmann::json mk = nlohmann::json::parse(slurp(kMarkers));
   mk["markers"].push_back({{"template_vertex", 5}, {"position", {1e6, 0, 0}}});
   std::ofstream(dir / "far.json") << mk.dump();
   r = run_cli("fit --template " + kTemplate + " --cloud " + kScan + " --markers " + (dir / "far.json").string() + " --out " +
               (dir / "b.ply").string(),
           dir);
-  EXPECT_EQ(r.code, 0) << r.err;
-  EXPECT_NE(r.out.find("outside the cloud's bounding box"), std::string::npos) << r.out;
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("outside the cloud's bounding box"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("the template as the markers posed it"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "b.ply"));
   std::filesystem::remove_all(dir);
 }
 

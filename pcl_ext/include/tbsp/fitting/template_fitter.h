@@ -331,7 +331,11 @@ struct FitReport {
 /// \param[out] result fitted mesh (template connectivity unless remeshing)
 /// \param[out] status per result vertex
 /// \throws InvalidInput for an empty cloud, markers on missing vertices/points, marker sets that
-/// leave the system singular, invalid parameters or an unsuitable template; Cancelled.
+/// leave the system singular, invalid parameters or an unsuitable template, and a fit in which no
+/// template vertex matched the cloud (with max_iterations > 0: the template far from the scan,
+/// markers off it; the message gives both bounding boxes); Cancelled. On an exception `result`
+/// and `status` are left as they were. A markerless alignment that turned the template by more
+/// than 30° or scaled it outside [2/3, 1.5] is fitted, with a warning in FitReport::message.
 FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N,
                        const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                        TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress = {},
