@@ -90,6 +90,29 @@ TEST(MeshValidation, RequireRejectsAlwaysInvalid) {
   EXPECT_THROW(require_valid_mesh(open, closed, "t"), InvalidInput);
 }
 
+// Found by hand (2026-12-06): a mesh in units 1e100 times too large ended in "not positive
+// definite: add constraints", one 1e-100 times too small in "every face has zero area" (the
+// squared norms under- and overflow). Coordinates within [1e-50, 1e50] pass, with any offset.
+TEST(MeshValidation, CoordinatesOutsideTheSafeRangeAreRefusedByName) {
+  for (double s : {1e-60, 1e60, 1e100, 1e-100}) {
+    TriMesh m = make_icosphere(1);
+    m.V *= s;
+    try {
+      require_valid_mesh(m, {}, "t");
+      ADD_FAILURE() << s;
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("outside [1e-50, 1e50]"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("scale the mesh"), std::string::npos) << e.what();
+    }
+  }
+  for (double s : {1e-40, 1e40}) {
+    TriMesh m = make_icosphere(1);
+    m.V *= s;
+    EXPECT_NO_THROW(require_valid_mesh(m, {}, "t")) << s;
+    EXPECT_TRUE(validate_mesh(m).degenerate_faces.empty()) << s;
+  }
+}
+
 TEST(PclConversions, RoundTripAndPolygons) {
   TriMesh m = make_icosphere(1);
   m.N = m.V;

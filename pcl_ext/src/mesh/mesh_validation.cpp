@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <cstdio>
 #include <array>
 #include <cmath>
 #include <functional>
@@ -189,6 +190,20 @@ MeshReport require_valid_mesh(const TriMesh& mesh, const MeshRequirements& req, 
   if (!req.allow_nonmanifold && !r.nonmanifold_edges.empty())
     fail("non-manifold edges (shared by more than two faces): " + first_edges(r.nonmanifold_edges) +
          "; split them or remove the extra faces (`tbsp validate` lists all)");
+  {
+    // lengths enter the systems to the fourth power (the squared norm of a cross product in the
+    // cotangent weights and areas): beyond 1e50 they overflow, below 1e-50 they underflow (a
+    // 1e150 mesh ended in "not positive definite", a 1e-100 one in "every face has zero area")
+    const double extent = mesh.V.cwiseAbs().maxCoeff(), diag = bbox_diagonal(mesh.V);
+    char buf[320];
+    if (extent > 1e50 || (diag > 0 && diag < 1e-50)) {
+      std::snprintf(buf, sizeof buf,
+                    "the coordinates reach %.3g and the bounding box's diagonal is %.3g: outside [1e-50, 1e50] squared areas "
+                    "and the Laplacian's weights under- or overflow; scale the mesh to a sane unit (metres, millimetres)",
+                    extent, diag);
+      fail(buf);
+    }
+  }
   if (r.degenerate_faces.size() == std::size_t(r.num_faces))
     fail("every face has zero area (the vertices coincide or lie on one line): there is no surface to process; check "
          "the vertex coordinates (units, a failed export)");
