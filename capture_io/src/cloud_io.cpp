@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
+#include <cstdio>
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
@@ -163,6 +165,16 @@ pcl::PCLPointCloud2 read_cloud(const std::string& path) {
                       std::to_string(rc) + "; see its message above)");
   } else {
     const TriMesh m = read_mesh(path);
+    // PCL clouds hold single precision: a finite coordinate beyond ±3.4e38 would become ±inf
+    // and the cloud's points "non-finite" to everything downstream
+    for (Eigen::Index i = 0; i < m.V.rows(); ++i)
+      for (int k = 0; k < 3; ++k)
+        if (std::isfinite(m.V(i, k)) && std::abs(m.V(i, k)) > double(std::numeric_limits<float>::max())) {
+          char buf[96];
+          std::snprintf(buf, sizeof buf, "%.6g", m.V(i, k));
+          throw FileError("'" + path + "': vertex " + std::to_string(i) + " has " + "xyz"[k] + " = " + buf +
+                          ", beyond the single precision (±3.4e38) of a PCL cloud; rescale the cloud to a sane unit");
+        }
     if (m.N.rows() == m.V.rows() && m.V.rows() > 0) {
       pcl::PointCloud<pcl::PointNormal> c;
       c.resize(std::size_t(m.V.rows()));

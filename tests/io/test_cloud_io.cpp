@@ -7,6 +7,7 @@
 #include <iterator>
 
 #include "test_util.h"
+#include "tbsp/core/error.h"
 #include "tbsp/io/cloud_io.h"
 
 using namespace tbsp;
@@ -67,4 +68,40 @@ TEST(CloudIo, PlyWithColourAndExtraFieldsKeepsThemAndReadsBack) {
   std::ifstream in(path, std::ios::binary);
   std::string header((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_NE(header.find("property uchar red"), std::string::npos);
+}
+
+// Found by hand (2026-12-06): a PLY/OBJ/OFF/VTK cloud with coordinates beyond single precision
+// (1e40, 1e100) was read as infinite points, and `fit` then said "no finite points (all are
+// NaN/Inf)" of a file without any. Now the reader names the file, the vertex and the value.
+TEST(CloudIo, CoordinatesBeyondSinglePrecisionAreNamed) {
+  const auto dir = test::temp_dir("cloud_big");
+  for (const char* name : {"c.ply", "c.obj", "c.off"}) {
+    const std::string p = (dir / name).string();
+    {
+      std::ofstream f(p);
+      if (std::string(name) == "c.ply")
+        f << "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\nproperty double z\nend_header\n"
+             "0 0 0\n1 0 0\n0 -1e40 1\n";
+      else if (std::string(name) == "c.obj")
+        f << "v 0 0 0\nv 1 0 0\nv 0 -1e40 1\n";
+      else
+        f << "OFF\n3 0 0\n0 0 0\n1 0 0\n0 -1e40 1\n";
+    }
+    try {
+      read_cloud_normals(p);
+      ADD_FAILURE() << name;
+    } catch (const FileError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(p), std::string::npos) << m;
+      EXPECT_NE(m.find("vertex 2 has y = -1e+40"), std::string::npos) << m;
+      EXPECT_NE(m.find("single precision"), std::string::npos) << m;
+    }
+  }
+  {
+    std::ofstream f((dir / "ok.ply").string());
+    f << "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\nproperty double y\nproperty double z\nend_header\n"
+         "0 0 0\n3e38 0 1\n";
+  }
+  EXPECT_FLOAT_EQ((*read_cloud_normals((dir / "ok.ply").string()))[1].x, 3e38f);
+  std::filesystem::remove_all(dir);
 }
