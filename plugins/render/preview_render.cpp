@@ -82,7 +82,8 @@ void render_panels_png(const std::string& path, const std::vector<RenderPanel>& 
     const bool colored = m.C.rows() == m.V.rows() && m.V.rows() > 0;
     for (int f : order) {
       const Eigen::RowVector3d a = X.row(m.F(f, 0)), b = X.row(m.F(f, 1)), cc = X.row(m.F(f, 2));
-      Eigen::Vector3d n = (b - a).cross(cc - a).transpose();
+      // edges in pixels: a mesh in tiny (1e-100) or huge units keeps a finite, non-zero normal
+      Eigen::Vector3d n = ((b - a) * s).cross((cc - a) * s).transpose();
       if (n.norm() <= 0) continue;
       n.normalize();
       const double shade = 0.25 + 0.75 * std::abs(n.dot(light));

@@ -204,6 +204,36 @@ TEST(Cli, DemoProducesOutputs) {
 }
 
 // Issue: `tbsp render` given a point cloud (a PLY with vertices only) drew an empty panel.
+// Found by hand (2026-12-06): a mesh in tiny units (1e-100) rendered as an empty panel (its
+// face normals underflowed to zero and every face was skipped), exit 0. Each panel framed on its
+// own, the mesh at 1e-100, 1 and 1e100 draws the same picture.
+TEST(Cli, RenderDrawsMeshesInAnyUnit) {
+  const auto dir = test::temp_dir("cli_render_units");
+  std::vector<std::string> files;
+  for (double s : {1e-100, 1.0, 1e100}) {
+    TriMesh m = make_icosphere(2);
+    m.V *= s;
+    files.push_back((dir / ("m" + std::to_string(files.size()) + ".off")).string());
+    write_mesh(files.back(), m);
+  }
+  const std::string png = (dir / "u.png").string();
+  const CliResult r = run_cli("render " + files[0] + " " + files[1] + " " + files[2] + " --own-frames --out " + png, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const cv::Mat img = cv::imread(png);
+  ASSERT_FALSE(img.empty());
+  const int w = img.cols / 3;
+  std::vector<int> ink(3, 0);
+  for (int k = 0; k < 3; ++k) {
+    const cv::Mat area = img(cv::Rect(k * w + 2, 30, w - 4, img.rows - 30));
+    for (int y = 0; y < area.rows; ++y)
+      for (int x = 0; x < area.cols; ++x) ink[std::size_t(k)] += area.at<cv::Vec3b>(y, x) != cv::Vec3b(255, 255, 255);
+  }
+  EXPECT_GT(ink[1], 20000);  // a shaded sphere
+  EXPECT_NEAR(ink[0], ink[1], 0.02 * ink[1]);
+  EXPECT_NEAR(ink[2], ink[1], 0.02 * ink[1]);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, RenderDrawsPointCloudsWithAColourBar) {
   const auto dir = test::temp_dir("cli_render_cloud");
   TriMesh cloud;
