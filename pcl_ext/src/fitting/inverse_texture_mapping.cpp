@@ -53,7 +53,7 @@ TextureMappingResult InverseTextureMapping::compute() const {
   const std::string who = "[tbsp::InverseTextureMapping::compute]";
   // ---------------------------------------------------------------- validation
   if (width_ < 2 || height_ < 2)
-    throw InvalidInput(who + " image size " + std::to_string(width_) + "x" + std::to_string(height_) + " is too small: call setImageSize() with at least 2x2 pixels");
+    throw InvalidInput(who + " image size " + std::to_string(width_) + "x" + std::to_string(height_) + " is too small: the image must have at least 2x2 pixels (setImageSize)");
   if (!mask_.empty() && mask_.size() != static_cast<std::size_t>(width_) * height_)
     throw InvalidInput(who + " the mask has " + std::to_string(mask_.size()) + " entries but the image has " +
                        std::to_string(static_cast<long>(width_) * height_) + " pixels; give a mask of the image's size");
