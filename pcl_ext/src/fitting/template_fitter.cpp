@@ -9,6 +9,7 @@
 #include <limits>
 #include <mutex>
 #include <optional>
+#include <system_error>
 #include <thread>
 
 #ifdef _OPENMP
@@ -190,7 +191,13 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     const int own = omp_get_max_threads();
 #endif
     std::vector<std::thread> pool;
-    for (int t = 1; t < workers; ++t) pool.emplace_back(work);
+    for (int t = 1; t < workers; ++t) {
+      try {
+        pool.emplace_back(work);
+      } catch (const std::system_error&) {  // no thread to be had: the threads started take the rest
+        break;
+      }
+    }
     work();
     for (auto& th : pool) th.join();
 #ifdef _OPENMP
