@@ -4,8 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <string>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "fit_state.h"

@@ -125,6 +125,11 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     require_a_match(rep, templ, P_in, false);
     result = std::move(fitted);
     status = std::move(st);
+    if (params.coarse_nodes > 0) {
+      rep.coarse_hypotheses = 1;
+      rep.coarse_kept = 0;
+      rep.coarse_scores = {rep.tail_mean};
+    }
     rep.t_total = seconds_since(t_all);
     return rep;
   }
@@ -186,6 +191,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
     }
   };
+  std::size_t started = 1;
   {
 #ifdef _OPENMP
     const int own = omp_get_max_threads();
@@ -198,6 +204,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         break;
       }
     }
+    started += pool.size();
     work();
     for (auto& th : pool) th.join();
 #ifdef _OPENMP
@@ -232,7 +239,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   rep.coarse_kept = int(kept);
   rep.coarse_scores = scores;
   std::string msg = std::to_string(nh) + " coarse-stage hypotheses" +
-                    (workers > 1 ? " (side by side on " + std::to_string(workers) + " threads)" : std::string()) +
+                    (started > 1 ? " (side by side on " + std::to_string(started) + " threads)" : std::string()) +
                     ", mean of the farthest 1 % of the cloud:";
   char buf[96];
   for (std::size_t h = 0; h < nh; ++h) {
