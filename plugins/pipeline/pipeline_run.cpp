@@ -295,19 +295,7 @@ RunReport run_pipeline(const Pipeline& p, const Registry& reg, const RunOptions&
     for (int t = 1; t < threads; ++t) pool.emplace_back(work, t, nullptr);
     work(0, &stages);
     for (auto& th : pool) th.join();
-    // the first real error (a worker stopped by another's failure reports Cancelled)
-    std::exception_ptr first_error;
-    for (auto& e : errors) {
-      if (!e) continue;
-      try {
-        std::rethrow_exception(e);
-      } catch (const Cancelled&) {
-        if (!first_error) first_error = e;
-      } catch (...) {
-        first_error = e;
-        break;
-      }
-    }
+    const std::exception_ptr first_error = first_real_error(errors);
     if (first_error) {
       discard_staged(staged.release());
       std::rethrow_exception(first_error);

@@ -39,6 +39,17 @@ typename pcl::PointCloud<PointT>::Ptr ellipsoid_cloud(int n, bool with_nan = fal
   return c;
 }
 
+// The ellipsoid cloud as the points and normals fit_template takes.
+void ellipsoid_matrices(int n, Eigen::MatrixX3d& P, Eigen::MatrixX3d& N) {
+  const auto c = ellipsoid_cloud<pcl::PointNormal>(n);
+  P.resize(Eigen::Index(c->size()), 3);
+  N.resize(Eigen::Index(c->size()), 3);
+  for (std::size_t i = 0; i < c->size(); ++i) {
+    P.row(Eigen::Index(i)) << (*c)[i].x, (*c)[i].y, (*c)[i].z;
+    N.row(Eigen::Index(i)) << (*c)[i].normal_x, (*c)[i].normal_y, (*c)[i].normal_z;
+  }
+}
+
 std::vector<FitMarker> axis_markers(const TriMesh& t, const pcl::PointCloud<pcl::PointXYZ>& xyz) {
   std::vector<FitMarker> m;
   for (int d = 0; d < 3; ++d)
@@ -231,12 +242,8 @@ TEST(BsplineWeight, IsTheC1QuadraticKernel) {
 // never goes back; cancelling from the progress callback stops every hypothesis and leaves the
 // result untouched.
 TEST(TemplateFitting, HypothesesSideBySideGiveTheFitOfOneThread) {
-  const auto c = ellipsoid_cloud<pcl::PointNormal>(2000);
-  Eigen::MatrixX3d P(Eigen::Index(c->size()), 3), N(Eigen::Index(c->size()), 3);
-  for (std::size_t i = 0; i < c->size(); ++i) {
-    P.row(Eigen::Index(i)) << (*c)[i].x, (*c)[i].y, (*c)[i].z;
-    N.row(Eigen::Index(i)) << (*c)[i].normal_x, (*c)[i].normal_y, (*c)[i].normal_z;
-  }
+  Eigen::MatrixX3d P, N;
+  ellipsoid_matrices(2000, P, N);
   TriMesh t = make_icosphere(3, 1.0);  // 642 vertices, roughly in place: turned by 6°, 3 % off
   t.V = (t.V * Eigen::AngleAxisd(6 * M_PI / 180, Eigen::Vector3d(1, 2, 0).normalized()).toRotationMatrix().transpose()).eval();
   t.V.rowwise() += Eigen::RowVector3d(0.03, -0.02, 0.0);
@@ -294,12 +301,8 @@ TEST(TemplateFitting, HypothesesSideBySideGiveTheFitOfOneThread) {
 // iteration was asked for: then the posed template is the result). An alignment far beyond
 // "roughly in place" (here a 3× scale) is fitted but warned about in the report.
 TEST(TemplateFittingBadInput, AFitThatMatchesNoVertexIsAnErrorAndAWildAlignmentAWarning) {
-  const auto c = ellipsoid_cloud<pcl::PointNormal>(2000);
-  Eigen::MatrixX3d P(Eigen::Index(c->size()), 3), N(Eigen::Index(c->size()), 3);
-  for (std::size_t i = 0; i < c->size(); ++i) {
-    P.row(Eigen::Index(i)) << (*c)[i].x, (*c)[i].y, (*c)[i].z;
-    N.row(Eigen::Index(i)) << (*c)[i].normal_x, (*c)[i].normal_y, (*c)[i].normal_z;
-  }
+  Eigen::MatrixX3d P, N;
+  ellipsoid_matrices(2000, P, N);
   const TriMesh t = make_icosphere(3, 1.0);
   FitParameters p;
   p.coarse_prepass_nodes = {};  // one hypothesis: quicker

@@ -211,20 +211,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     omp_set_num_threads(own);
 #endif
   }
-  // the first real error (a hypothesis stopped by another's failure reports Cancelled)
-  std::exception_ptr failed, cancelled;
-  for (const auto& e : errors) {
-    if (!e) continue;
-    try {
-      std::rethrow_exception(e);
-    } catch (const Cancelled&) {
-      if (!cancelled) cancelled = e;
-    } catch (...) {
-      if (!failed) failed = e;
-    }
-  }
-  if (failed) std::rethrow_exception(failed);
-  if (cancelled) std::rethrow_exception(cancelled);
+  if (const std::exception_ptr e = first_real_error(errors)) std::rethrow_exception(e);
   std::vector<double> scores;
   std::size_t kept = 0;
   for (std::size_t h = 0; h < nh; ++h) {

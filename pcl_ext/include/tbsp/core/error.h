@@ -9,8 +9,10 @@
 /// - A user cancel (progress callback returned false) throws tbsp::Cancelled.
 /// Outputs passed by reference are left untouched when any of these is thrown.
 
+#include <exception>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace tbsp {
 
@@ -44,5 +46,23 @@ class Cancelled : public Error {
 public:
   explicit Cancelled(const std::string& what = "operation cancelled") : Error(what) {}
 };
+
+/// Of the errors of parallel workers (null: the worker finished), the one to report: the first
+/// that is not Cancelled (a worker stopped because another failed reports Cancelled), else the
+/// first Cancelled; null when there is none.
+inline std::exception_ptr first_real_error(const std::vector<std::exception_ptr>& errors) {
+  std::exception_ptr cancelled;
+  for (const auto& e : errors) {
+    if (!e) continue;
+    try {
+      std::rethrow_exception(e);
+    } catch (const Cancelled&) {
+      if (!cancelled) cancelled = e;
+    } catch (...) {
+      return e;
+    }
+  }
+  return cancelled;
+}
 
 }  // namespace tbsp
