@@ -208,6 +208,15 @@ TEST(MarkerAnimation, BadInputGivesClearErrors) {
   expect_error({{"A", 0, true}, {"B", 50, true}, {"C", 50, true}}, "'B' and 'C' both map to template vertex 50");
   expect_error({}, "map is empty");
   expect_error({{"A", 0, true}, {"B", 50, false}, {"C", 100, false}}, "3 or more");
+  // alignment markers on one line or at one point (found by hand 2026-12-06: coincident ones
+  // scaled the template to a point and ended in "degenerate tetrahedra, re-tetrahedralize";
+  // collinear ones were fitted with an undetermined turn, exit 0)
+  const Eigen::MatrixXd good = data;
+  for (int k = 0; k < 3; ++k) data.block<2, 3>(0, 3 * k) = rest.V.row(0).replicate(2, 1);
+  expect_error({{"A", 0, true}, {"B", 50, true}, {"C", 100, true}}, "on one line or at one point");
+  for (int k = 0; k < 3; ++k) data.block<2, 3>(0, 3 * k) << double(k), 0, 0, double(k), 0, 0;
+  expect_error({{"A", 0, true}, {"B", 50, true}, {"C", 100, true}}, "are, in frame 0 of the trajectories, on one line");
+  data = good;
   MarkerAnimationOptions o;
   o.iterations = 0;
   MarkerAnimation anim;

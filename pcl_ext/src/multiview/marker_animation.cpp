@@ -5,6 +5,7 @@
 #include <memory>
 
 #include <Eigen/Geometry>
+#include <Eigen/SVD>
 
 #include "tbsp/core/error.h"
 #include "tbsp/core/timer.h"
@@ -15,6 +16,17 @@
 #include "tbsp/mesh/tetrahedralize.h"
 
 namespace tbsp {
+
+namespace {
+// True when the points (columns) span a plane: a similarity fitted to them has a defined
+// rotation and a non-zero scale (collinear or coincident points do not).
+bool spans_a_plane(const Eigen::Matrix3Xd& X) {
+  if (X.cols() < 3) return false;
+  const Eigen::Matrix3Xd C = X.colwise() - X.rowwise().mean();
+  const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3Xd>(C).singularValues();
+  return sv(0) > 0 && sv(1) > 1e-6 * sv(0);
+}
+}  // namespace
 
 bool MarkerAnimationOptions::isValid(std::string* why) const {
   auto fail = [&](const std::string& m) {
@@ -170,6 +182,15 @@ void MarkerAnimation::start() {
     for (std::size_t i = 0; i < use.size(); ++i) {
       src.col(Eigen::Index(i)) = rest.row(Eigen::Index(use[i])).transpose();
       dst.col(Eigen::Index(i)) = data_.block<1, 3>(f0, 3 * column_[use[i]]).transpose();
+    }
+    if (!spans_a_plane(dst) || !spans_a_plane(src)) {
+      std::string names;
+      for (std::size_t i = 0; i < use.size() && i < 8; ++i) names += (i ? ", " : "") + map_[use[i]].marker;
+      if (use.size() > 8) names += ", ...";
+      throw InvalidInput(who + "the alignment markers (" + names + ") " +
+                         (spans_a_plane(dst) ? "map to template vertices" : "are, in frame " + std::to_string(f0) + " of the trajectories,") +
+                         " on one line or at one point: a similarity needs three that span a plane; mark more, spread-out entries "
+                         "\"align\": true (or pose the template yourself and turn the alignment off: --no-align, MarkerAnimationOptions::align)");
     }
     const Eigen::Matrix4d S = Eigen::umeyama(src, dst, true);
     if (!S.allFinite()) throw InvalidInput(who + "the alignment markers are degenerate (collinear or coincident): mark more, spread-out entries");
