@@ -170,6 +170,10 @@ int run_pair(const StereoArgs& a) {
         p.r = c[2];
         cloud.push_back(p);
       }
+    if (cloud.empty())  // (an empty cloud made the writer fail with "cannot write")
+      throw InvalidInput("'" + a.left + "' / '" + a.right + "': no matched pixel has a positive disparity + doffs (" +
+                         std::to_string(calib.doffs) + "), so no point has a finite depth and no cloud is written: the images show "
+                         "no parallax (the same image twice? left and right swapped?)");
     pcl::PCLPointCloud2 b;
     pcl::toPCLPointCloud2(cloud, b);
     const std::string cp = (out / ("cloud." + a.format)).string();

@@ -95,6 +95,14 @@ TEST(CliStereo, RectifiedPairWithGroundTruthAndBadInput) {
   EXPECT_NE(r.err.find("multiple of 16"), std::string::npos) << r.err;
   r = run_cli("stereo --out " + out, dir);
   EXPECT_EQ(r.code, 2);
+  // the same image twice: no parallax, no finite depth (found by hand 2026-12-06: "cannot write
+  // cloud.ply", the writer refusing an empty cloud); the cloud of the run above stays
+  std::ofstream(calib) << "cam0=[1000 0 225; 0 1000 187; 0 0 1]\ncam1=[1000 0 225; 0 1000 187; 0 0 1]\nbaseline=100\nwidth=450\nheight=375\nndisp=64\n";
+  const auto before = fs::file_size(out + "/cloud.ply");
+  r = run_cli("stereo --left " + m + "im2.png --right " + m + "im2.png --calib " + calib + " --out " + out, dir);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("no parallax"), std::string::npos) << r.err;
+  EXPECT_EQ(fs::file_size(out + "/cloud.ply"), before);
 }
 
 TEST(CliStereo, RefineStereoKeepsAGoodMeshAndNamesMissingMeshes) {
