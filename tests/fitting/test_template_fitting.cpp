@@ -326,6 +326,14 @@ TEST(TemplateFittingBadInput, AFitThatMatchesNoVertexIsAnErrorAndAWildAlignmentA
   p.max_iterations = 5;
   const FitReport near = fit_template(t, P, N, {}, RegionOfInterest{}, p, out, st);
   EXPECT_EQ(near.message.find("warning: the alignment"), std::string::npos) << near.message;
+  EXPECT_EQ(near.message.find("fold back"), std::string::npos) << near.message;
+  // three points for 642 vertices: fitted, crumpled, and said so
+  Eigen::MatrixX3d P3(3, 3);
+  P3 << 0, 0, 0, 1, 0, 0, 0, 1, 0;
+  const FitReport three = fit_template(t, P3, Eigen::MatrixX3d(0, 3), {}, RegionOfInterest{}, p, out, st);
+  EXPECT_GT(three.folded_edges, 19);
+  EXPECT_NE(three.message.find("edges of the result"), std::string::npos) << three.message;
+  EXPECT_NE(three.message.find("fold back by more than 120 deg: the fit crumpled"), std::string::npos) << three.message;
   const FitReport big = fit_template(t, (3.0 * P).eval(), N, {}, RegionOfInterest{}, p, out, st);
   EXPECT_GT(big.alignment_scale, 2.0);  // the ellipsoid (1.5 x 1 x 0.8) against the unit sphere: ~3.5
   EXPECT_NE(big.message.find("warning: the alignment turned the template by"), std::string::npos) << big.message;

@@ -83,6 +83,24 @@ void require_a_match(const FitReport& rep, const TriMesh& templ, const Eigen::Ma
                      ", or raise max_match_distance / max_normal_angle_deg");
 }
 
+// A crumpled result (a fit to a handful of points, markers pulling against the data) is said
+// so in the report: more than 1 % of the edges (and at least 10) bent back by more than 120°
+// beyond those the template has itself.
+void warn_if_crumpled(FitReport& rep, const TriMesh& templ) {
+  const double n_edges = 1.5 * double(rep.faces);
+  if (rep.folded_edges < 10 || rep.folded_edges <= 0.01 * n_edges) return;
+  const int own = fit_impl::folded_edges(templ.F, templ.V, nullptr);
+  const int extra = rep.folded_edges - own;
+  if (extra < 10 || extra <= 0.01 * n_edges) return;
+  char buf[360];
+  std::snprintf(buf, sizeof buf,
+                "warning: %d edges of the result (%.1f %%; the template has %d) fold back by more than 120 deg: the fit crumpled; "
+                "check it (too few cloud points for the template, markers off the scan, a template far from the scan's shape). ",
+                rep.folded_edges, 100.0 * rep.folded_edges / n_edges, own);
+  rep.message += buf;
+  logger()->warn("[TemplateFitting] {}", buf);
+}
+
 // The part [lo, hi] of `progress` (empty when `progress` is).
 ProgressCallback sub_progress(const ProgressCallback& progress, double lo, double hi) {
   if (!progress) return {};
@@ -102,8 +120,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   if (!markerless) {
     TriMesh fitted;
     std::vector<VertexStatus> st;
-    const FitReport rep = fit_once(templ, P_in, N_in, markers, roi, params, fitted, st, progress, orient_normals, 0);
+    FitReport rep = fit_once(templ, P_in, N_in, markers, roi, params, fitted, st, progress, orient_normals, 0);
     require_a_match(rep, templ, P_in, !markers.empty());
+    warn_if_crumpled(rep, templ);
     result = std::move(fitted);
     status = std::move(st);
     return rep;
@@ -123,6 +142,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     std::vector<VertexStatus> st;
     FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, fitted, st, progress, orient_normals, 0, shared);
     require_a_match(rep, templ, P_in, false);
+    warn_if_crumpled(rep, templ);
     result = std::move(fitted);
     status = std::move(st);
     if (params.coarse_nodes > 0) {
@@ -220,6 +240,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   }
   FitReport rep = std::move(reps[kept]);
   require_a_match(rep, templ, P_in, false);
+  warn_if_crumpled(rep, templ);
   result = std::move(results[kept]);
   status = std::move(statuses[kept]);
   rep.coarse_hypotheses = int(nh);

@@ -335,7 +335,8 @@ struct FitReport {
 /// template vertex matched the cloud (with max_iterations > 0: the template far from the scan,
 /// markers off it; the message gives both bounding boxes); Cancelled. On an exception `result`
 /// and `status` are left as they were. A markerless alignment that turned the template by more
-/// than 30° or scaled it outside [2/3, 1.5] is fitted, with a warning in FitReport::message.
+/// than 30° or scaled it outside [2/3, 1.5] is fitted, with a warning in FitReport::message; so is
+/// a result with more than 1 % of its edges (beyond the template's own) folded back by over 120°.
 FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N,
                        const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                        TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress = {},
