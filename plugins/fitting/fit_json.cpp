@@ -173,6 +173,10 @@ nlohmann::json fit_report_json(const FitReport& r) {
                   {"self_intersections_before_repair", r.self_intersections_before},
                   {"pleat_faces_before", r.pleat_faces_before}, {"pleat_faces_after", r.pleat_faces_after},
                   {"pleat_collapses", r.pleat_collapses}};
+  j["unexplained_regions"] = nlohmann::json::array();
+  for (const auto& u : r.unexplained)
+    j["unexplained_regions"].push_back(
+        {{"points", u.points}, {"centre", {u.centre.x(), u.centre.y(), u.centre.z()}}, {"max_distance", u.max_distance}});
   j["timings_s"] = {{"normals", r.t_normals},     {"search_structure", r.t_search}, {"initial_deformation", r.t_initial},
                     {"coarse_stage", r.t_coarse},
                     {"global_scale", r.t_scale},  {"iterations", r.t_iterations},   {"matching", r.t_matching},

@@ -9,10 +9,56 @@
 #include "tbsp/core/timer.h"
 #include "tbsp/mesh/mesh_validation.h"
 #include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/mesh/point_search.h"
 #include "tbsp/mesh/remeshing.h"
 
 namespace tbsp {
 namespace fit_impl {
+
+std::vector<FitReport::UnexplainedRegion> unexplained_regions(const Eigen::MatrixX3d& Q, const Eigen::VectorXd& dist, double diag,
+                                                              double r_max) {
+  const double far = std::max(2 * r_max, 0.01 * diag), link = 0.5 * far;
+  std::vector<Eigen::Index> idx;
+  for (Eigen::Index i = 0; i < Q.rows(); ++i)
+    if (dist(i) > far) idx.push_back(i);
+  const std::size_t min_points = std::max<std::size_t>(30, std::size_t(Q.rows()) / 1000);
+  if (idx.size() < min_points) return {};
+  Eigen::MatrixX3d F(Eigen::Index(idx.size()), 3);
+  for (std::size_t k = 0; k < idx.size(); ++k) F.row(Eigen::Index(k)) = Q.row(idx[k]);
+  // groups of far points linked within `link`: union-find, the lower index the root (the
+  // groups do not depend on the order the links are visited in)
+  std::vector<Eigen::Index> root(idx.size());
+  for (std::size_t k = 0; k < root.size(); ++k) root[k] = Eigen::Index(k);
+  auto find = [&](Eigen::Index a) {
+    while (root[std::size_t(a)] != a) a = root[std::size_t(a)] = root[std::size_t(root[std::size_t(a)])];
+    return a;
+  };
+  const PointSearch tree(F);
+  std::vector<std::pair<Eigen::Index, double>> nb;
+  for (Eigen::Index k = 0; k < F.rows(); ++k) {
+    tree.radius(F.row(k).transpose(), link, nb);
+    for (const auto& e : nb) {
+      const Eigen::Index a = find(k), b = find(e.first);
+      if (a != b) root[std::size_t(std::max(a, b))] = std::min(a, b);
+    }
+  }
+  std::vector<FitReport::UnexplainedRegion> regions(idx.size());
+  for (Eigen::Index k = 0; k < F.rows(); ++k) {
+    FitReport::UnexplainedRegion& r = regions[std::size_t(find(k))];
+    ++r.points;
+    r.centre += F.row(k).transpose();
+    r.max_distance = std::max(r.max_distance, dist(idx[std::size_t(k)]));
+  }
+  std::vector<FitReport::UnexplainedRegion> out;
+  for (auto& r : regions)
+    if (r.points >= Eigen::Index(min_points)) {
+      r.centre /= double(r.points);
+      out.push_back(r);
+    }
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.points > b.points; });
+  if (out.size() > 8) out.resize(8);
+  return out;
+}
 
 void compute_metrics(FitState& s, int known_crossings) {
   FitReport& rep = s.rep;
@@ -48,6 +94,7 @@ void compute_metrics(FitState& s, int known_crossings) {
     for (auto it = sorted.end() - std::ptrdiff_t(k); it != sorted.end(); ++it) tail += *it;
     rep.tail_mean = tail / double(k);
     rep.coverage_points = double((dist.array() <= u.max_match_distance).count()) / double(nq);
+    rep.unexplained = unexplained_regions(Q, dist, diag, u.max_match_distance);
     // fold-overs: face normal against the cloud normals near the face centre. Estimated normals
     // are first made consistent for this count (unless the fit already did): a patch the
     // template oriented inwards (a sphere over a concave ledge) is not a patch of flipped faces.

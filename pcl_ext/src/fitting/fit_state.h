@@ -215,6 +215,9 @@ int repair_surface(FitState& s);
 
 // ---- fit_metrics.cpp
 void compute_metrics(FitState& s, int known_crossings);
+/// FitReport::unexplained of the ROI points Q and their distances to the result.
+std::vector<FitReport::UnexplainedRegion> unexplained_regions(const Eigen::MatrixX3d& Q, const Eigen::VectorXd& dist, double diag,
+                                                              double r_max);
 
 }  // namespace fit_impl
 }  // namespace tbsp

@@ -102,6 +102,22 @@ void warn_if_crumpled(FitReport& rep, const TriMesh& templ) {
 }
 
 // The part [lo, hi] of `progress` (empty when `progress` is).
+// The warning for FitReport::unexplained: the largest region, where it is, what to do.
+void warn_if_unexplained(FitReport& rep) {
+  if (rep.unexplained.empty()) return;
+  const FitReport::UnexplainedRegion& r = rep.unexplained.front();
+  const double d = rep.bbox_diagonal > 0 ? rep.bbox_diagonal : 1;
+  char buf[480];
+  std::snprintf(buf, sizeof buf,
+                "warning: %zu region%s of the cloud %s not explained by the result (the largest: %lld points around (%.4g, %.4g, %.4g), "
+                "up to %.2f %% of the diagonal away): a part of the template may have stayed behind (give a marker on it), or "
+                "the points are not the object (exclude them with the region of interest). ",
+                rep.unexplained.size(), rep.unexplained.size() > 1 ? "s" : "", rep.unexplained.size() > 1 ? "are" : "is",
+                static_cast<long long>(r.points), r.centre.x(), r.centre.y(), r.centre.z(), 100 * r.max_distance / d);
+  rep.message += buf;
+  logger()->warn("[TemplateFitting] {}", buf);
+}
+
 ProgressCallback sub_progress(const ProgressCallback& progress, double lo, double hi) {
   if (!progress) return {};
   return [&progress, lo, hi](double f, const std::string& stage) { return progress(lo + (hi - lo) * f, stage); };
@@ -123,6 +139,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     FitReport rep = fit_once(templ, P_in, N_in, markers, roi, params, fitted, st, progress, orient_normals, 0);
     require_a_match(rep, templ, P_in, !markers.empty());
     warn_if_crumpled(rep, templ);
+    warn_if_unexplained(rep);
     result = std::move(fitted);
     status = std::move(st);
     return rep;
@@ -143,6 +160,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     FitReport rep = markerless_fit(templ, P_in, N_in, roi, params, fitted, st, progress, orient_normals, 0, shared);
     require_a_match(rep, templ, P_in, false);
     warn_if_crumpled(rep, templ);
+    warn_if_unexplained(rep);
     result = std::move(fitted);
     status = std::move(st);
     if (params.coarse_nodes > 0) {
@@ -241,6 +259,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   FitReport rep = std::move(reps[kept]);
   require_a_match(rep, templ, P_in, false);
   warn_if_crumpled(rep, templ);
+  warn_if_unexplained(rep);
   result = std::move(results[kept]);
   status = std::move(statuses[kept]);
   rep.coarse_hypotheses = int(nh);

@@ -286,6 +286,19 @@ struct FitReport {
   /// mean of the largest 1 % of the distances (the mean beyond p99): how far the worst-fitted
   /// parts of the cloud are; it ranks the coarse-stage hypotheses of a fit without markers
   double tail_mean = 0;
+  /// A region of the cloud the result does not explain (see `unexplained`).
+  struct UnexplainedRegion {
+    Eigen::Index points = 0;                           ///< ROI points in it
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();  ///< their mean, cloud units
+    double max_distance = 0;                           ///< the farthest one's distance to the result
+  };
+  /// Groups of ROI points farther than 2 % of the bounding-box diagonal from the result (points
+  /// within 1 % of it of each other joined), each of at least max(30, 0.1 % of the ROI points),
+  /// largest first, at most 8. Typically a part of the template that stayed behind (an ear, a
+  /// limb or a finger turned beyond the fit's reach: give a marker there) or data that are not
+  /// the object (clutter: exclude it with the region of interest). Scattered outliers and noise
+  /// do not form regions. A fit that leaves any is reported with a warning in `message`.
+  std::vector<UnexplainedRegion> unexplained;
   double coverage_vertices = 0;          ///< fraction of (non-masked) template vertices matched
   double coverage_points = 0;            ///< fraction of ROI points within r_max of the result
   /// faces more than 120° against the cloud normal nearest to their centre (within r_max);
