@@ -82,6 +82,8 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_EQ(j["metrics"]["pleat_faces_before"].get<int>(), 0);
   EXPECT_FALSE(j["parameters"]["check_self_intersections"].get<bool>());
   EXPECT_EQ(j["metrics"]["self_intersections"].get<int>(), -1);  // not checked without --fairing
+  ASSERT_TRUE(j["unexplained_regions"].is_array());
+  EXPECT_TRUE(j["unexplained_regions"].empty()) << j["unexplained_regions"].dump();  // the fit explains the scan
   // detail rounds: same connectivity, the report says what they did, the fit is not worse
   const std::string out2 = (dir / "fit_detail.ply").string(), rep2 = (dir / "r2.json").string();
   ASSERT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
