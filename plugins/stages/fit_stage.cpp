@@ -49,7 +49,9 @@ public:
     }
     ctx.numbers = {{"hausdorff_rel", rep.hausdorff_rel}, {"rms_rel", rep.rms / std::max(rep.bbox_diagonal, 1e-300)},
                    {"p99_rel", rep.p99 / std::max(rep.bbox_diagonal, 1e-300)}, {"iterations", double(rep.iterations)},
-                   {"scale", rep.scale}, {"coverage_points", rep.coverage_points}, {"warm_start", warm ? 1.0 : 0.0}};
+                   {"scale", rep.scale}, {"coverage_points", rep.coverage_points}, {"warm_start", warm ? 1.0 : 0.0},
+                   {"unexplained_regions", double(rep.unexplained.size())},
+                   {"unexplained_points", rep.unexplained.empty() ? 0.0 : double(rep.unexplained.front().points)}};
     auto mesh = std::make_shared<const TriMesh>(std::move(out));
     if (warm_) last_ = mesh;
     return {{"mesh", Data::of(mesh)}};

@@ -137,6 +137,7 @@ TEST(PipelineReplay, StudioRangeScansFitEveryFrameWarmStarted) {
                 rep["frames"][f]["numbers"]["fit"]["warm_start"].get<double>());
     dist.push_back(mean);
     EXPECT_EQ(rep["frames"][f]["numbers"]["fit"]["warm_start"].get<double>(), f > 0 ? 1.0 : 0.0);
+    EXPECT_EQ(rep["frames"][f]["numbers"]["fit"]["unexplained_regions"].get<double>(), 0.0);  // every frame's scans explained
   }
   // The fit's result moves with the rounding of the BLAS kernels (a matching decision flips and
   // the fit stops at another iteration; docs/pipelines.md): over OpenBLAS's Haswell, SkylakeX,
