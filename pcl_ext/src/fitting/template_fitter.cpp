@@ -114,8 +114,12 @@ void warn_if_unexplained(FitReport& rep) {
                 "the points are not the object (exclude them with the region of interest). ",
                 rep.unexplained.size(), rep.unexplained.size() > 1 ? "s" : "", rep.unexplained.size() > 1 ? "are" : "is",
                 static_cast<long long>(r.points), r.centre.x(), r.centre.y(), r.centre.z(), 100 * r.max_distance / d);
-  rep.message += buf;
-  logger()->warn("[TemplateFitting] {}", buf);
+  std::string msg = buf;
+  if (rep.used.coarse_nodes <= 0)
+    msg += "This fit ran without the coarse stage, which turns such parts back (FitParameters::coarse_nodes = 400, "
+           "`tbsp fit --coarse-nodes 400`). ";
+  rep.message += msg;
+  logger()->warn("[TemplateFitting] {}", msg);
 }
 
 ProgressCallback sub_progress(const ProgressCallback& progress, double lo, double hi) {
