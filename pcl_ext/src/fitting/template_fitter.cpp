@@ -102,6 +102,13 @@ void warn_if_crumpled(FitReport& rep, const TriMesh& templ) {
 }
 
 // The part [lo, hi] of `progress` (empty when `progress` is).
+// Points in the regions a fit left unexplained.
+Eigen::Index unexplained_points(const FitReport& r) {
+  Eigen::Index n = 0;
+  for (const auto& u : r.unexplained) n += u.points;
+  return n;
+}
+
 // The warning for FitReport::unexplained: the largest region, where it is, what to do.
 void warn_if_unexplained(FitReport& rep) {
   if (rep.unexplained.empty()) return;
@@ -115,7 +122,7 @@ void warn_if_unexplained(FitReport& rep) {
                 rep.unexplained.size(), rep.unexplained.size() > 1 ? "s" : "", rep.unexplained.size() > 1 ? "are" : "is",
                 static_cast<long long>(r.points), r.centre.x(), r.centre.y(), r.centre.z(), 100 * r.max_distance / d);
   std::string msg = buf;
-  if (rep.used.coarse_nodes <= 0)
+  if (rep.used.coarse_nodes <= 0 && !rep.coarse_retried)
     msg += "This fit ran without the coarse stage, which turns such parts back (FitParameters::coarse_nodes = 400, "
            "`tbsp fit --coarse-nodes 400`). ";
   rep.message += msg;
@@ -140,8 +147,42 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   if (!markerless) {
     TriMesh fitted;
     std::vector<VertexStatus> st;
-    FitReport rep = fit_once(templ, P_in, N_in, markers, roi, params, fitted, st, progress, orient_normals, 0);
+    // automatic coarse stage with markers: off, and run in a second fit when the first leaves
+    // regions of the scan unexplained (a part the markers did not turn far enough)
+    const bool may_retry = params_in.coarse_nodes == -1 && params.coarse_nodes == 0 && !params.remeshing;
+    const auto t_all = Clock::now();
+    FitReport rep = fit_once(templ, P_in, N_in, markers, roi, params, fitted, st, may_retry ? sub_progress(progress, 0.0, 0.6) : progress,
+                             orient_normals, 0);
     require_a_match(rep, templ, P_in, !markers.empty());
+    if (may_retry && !rep.unexplained.empty()) {
+      FitParameters with_coarse = params;
+      with_coarse.coarse_nodes = 400;
+      TriMesh f2;
+      std::vector<VertexStatus> st2;
+      FitReport rep2 = fit_once(templ, P_in, N_in, markers, roi, with_coarse, f2, st2, sub_progress(progress, 0.6, 1.0), orient_normals, 0);
+      // kept when it leaves under half the unexplained points of the first fit (sums over the
+      // regions: scattered outliers, which dominate any tail statistic of noisy scans, are not in
+      // them; the margin keeps near-equal fits from flipping on rounding)
+      const Eigen::Index u1 = unexplained_points(rep), u2 = unexplained_points(rep2);
+      const bool better = 2 * u2 < u1;
+      char buf[320];
+      std::snprintf(buf, sizeof buf,
+                    "%zu region(s) of the cloud (%lld points) were left unexplained: fitted again with the coarse stage (400 nodes), "
+                    "which leaves %lld; %s kept. ",
+                    rep.unexplained.size(), static_cast<long long>(u1), static_cast<long long>(u2),
+                    better ? "the coarse stage's fit" : "the first fit");
+      logger()->info("[TemplateFitting] {}", buf);
+      if (better) {
+        rep = std::move(rep2);
+        fitted = std::move(f2);
+        st = std::move(st2);
+      }
+      rep.coarse_retry_unexplained = {u1, u2};
+      rep.coarse_retried = true;
+      rep.message = buf + rep.message;
+      rep.t_total = seconds_since(t_all);
+    }
+    if (may_retry) report_progress(progress, 1.0, "done");
     warn_if_crumpled(rep, templ);
     warn_if_unexplained(rep);
     result = std::move(fitted);

@@ -144,7 +144,10 @@ struct FitParameters {
   /// aligns the template itself (align_without_markers, auto_markers > 0, no remeshing), where
   /// nothing else can follow a turned part; off with markers, where it pays for pose differences
   /// of 30-45° and costs a little accuracy when the markers already pose the template well
-  /// (docs/fitting.md). 400 is the measured setting. −1, 0 (off) or 4..20000.
+  /// (docs/fitting.md). With markers, −1 also runs the fit a second time with 400 nodes when the
+  /// first leaves regions of the scan unexplained (FitReport::unexplained: a part the markers did
+  /// not turn far enough) and keeps that fit when it leaves under half as many points unexplained
+  /// (FitReport::coarse_retried). 400 is the measured setting. −1, 0 (off) or 4..20000.
   int coarse_nodes = -1;
   /// Without markers (the auto_markers flow) and with the coarse stage on: one more hypothesis
   /// per entry. The whole fit runs once with the coarse_nodes graph alone and once per entry with
@@ -269,6 +272,12 @@ struct FitReport {
   double alignment_rotation_deg = 0, alignment_scale = 1, alignment_rms = 0;
   int alignment_iterations = 0;
   int coarse_nodes = 0, coarse_steps = 0;  ///< coarse stage: graph nodes, Gauss-Newton steps (0: off)
+  /// with markers and coarse_nodes −1: the first fit left regions unexplained and the fit ran
+  /// again with the coarse stage; the points in the two fits' unexplained regions (first, with
+  /// the coarse stage). The second is kept when it leaves under half as many (then coarse_nodes
+  /// is 400).
+  bool coarse_retried = false;
+  std::vector<Eigen::Index> coarse_retry_unexplained;
   /// without markers, with the coarse stage: hypotheses fitted (1 + the usable entries of
   /// FitParameters::coarse_prepass_nodes), the kept one's index (0: the coarse_nodes graph alone)
   /// and coarser graph (its nodes; 0: none), and each hypothesis's tail_mean in the order they ran
