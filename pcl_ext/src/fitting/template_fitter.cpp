@@ -8,6 +8,7 @@
 #include <exception>
 #include <limits>
 #include <mutex>
+#include <memory>
 #include <optional>
 #include <system_error>
 #include <thread>
@@ -21,6 +22,7 @@
 #include "tbsp/core/logging.h"
 #include "tbsp/core/timer.h"
 #include "tbsp/mesh/mesh_validation.h"
+#include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/mesh/point_search.h"
 #include "tbsp/solve/blas_threads.h"
 
@@ -33,6 +35,33 @@ namespace {
 struct SharedWork {
   std::optional<fit_impl::PreparedCloud> cloud;
   std::optional<SimilarityIcpResult> alignment;
+};
+
+// One fit in two parts: the constructor runs it up to the detail rounds (alignment, initial pose,
+// coarse stage, iterations, propagation), finish() does the rest (detail rounds, repair, metrics).
+// In between regions_now() tells which regions of the cloud the fit so far leaves unexplained, so
+// a fit with markers can decide on the coarse-stage retry before it spends the detail rounds.
+// Holds references to the template, markers and (shared) cloud: they must outlive it.
+class FitRun {
+public:
+  FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const std::vector<FitMarker>& markers,
+         const RegionOfInterest& roi, const FitParameters& params, ProgressCallback progress, bool orient_normals, int coarse_prepass,
+         SharedWork* shared = nullptr);
+  FitRun(const FitRun&) = delete;
+  FitRun& operator=(const FitRun&) = delete;
+  /// FitReport::unexplained of the current shape (point_mesh_distances of the ROI points).
+  std::vector<FitReport::UnexplainedRegion> regions_now() const;
+  FitReport finish(TriMesh& result, std::vector<VertexStatus>& status);
+
+private:
+  Clock::time_point t_all_;
+  ScopedBlasThreads blas_threads_;
+  ProgressCallback progress_;
+  std::optional<fit_impl::PreparedCloud> own_;
+  FitReport rep_;
+  std::vector<VertexStatus> status_;
+  TriMesh aligned_;
+  std::unique_ptr<fit_impl::FitState> s_;
 };
 
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
@@ -103,9 +132,9 @@ void warn_if_crumpled(FitReport& rep, const TriMesh& templ) {
 
 // The part [lo, hi] of `progress` (empty when `progress` is).
 // Points in the regions a fit left unexplained.
-Eigen::Index unexplained_points(const FitReport& r) {
+Eigen::Index unexplained_points(const std::vector<FitReport::UnexplainedRegion>& regions) {
   Eigen::Index n = 0;
-  for (const auto& u : r.unexplained) n += u.points;
+  for (const auto& u : regions) n += u.points;
   return n;
 }
 
@@ -148,41 +177,67 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     TriMesh fitted;
     std::vector<VertexStatus> st;
     // automatic coarse stage with markers: off, and run in a second fit when the first leaves
-    // regions of the scan unexplained (a part the markers did not turn far enough)
+    // regions of the scan unexplained (a part the markers did not turn far enough). With detail
+    // rounds the regions are looked at before them (the rounds draw a stuck part closer without
+    // bringing it back), and only the kept fit runs them.
     const bool may_retry = params_in.coarse_nodes == -1 && params.coarse_nodes == 0 && !params.remeshing;
+    const bool before_detail = may_retry && params.detail_rounds > 0;
     const auto t_all = Clock::now();
-    FitReport rep = fit_once(templ, P_in, N_in, markers, roi, params, fitted, st, may_retry ? sub_progress(progress, 0.0, 0.6) : progress,
-                             orient_normals, 0);
-    require_a_match(rep, templ, P_in, !markers.empty());
-    if (may_retry && !rep.unexplained.empty()) {
-      FitParameters with_coarse = params;
-      with_coarse.coarse_nodes = 400;
+    // one bar over both fits: never backwards (the first fit may finish after the second ran)
+    auto last = std::make_shared<double>(0.0);
+    const ProgressCallback mono = [progress, last](double f, const std::string& stage) {
+      *last = std::max(*last, f);
+      return progress ? progress(*last, stage) : true;
+    };
+    FitParameters with_coarse = params;
+    with_coarse.coarse_nodes = 400;
+    FitReport rep;
+    std::unique_ptr<FitRun> run1 = std::make_unique<FitRun>(templ, P_in, N_in, markers, roi, params,
+                                                            may_retry ? sub_progress(mono, 0.0, 0.55) : progress, orient_normals, 0);
+    std::vector<FitReport::UnexplainedRegion> regions1;
+    if (before_detail) regions1 = run1->regions_now();
+    else rep = run1->finish(fitted, st), regions1 = rep.unexplained;
+    if (!before_detail) require_a_match(rep, templ, P_in, !markers.empty());
+    if (may_retry && !regions1.empty()) {
+      FitRun run2(templ, P_in, N_in, markers, roi, with_coarse, sub_progress(mono, 0.55, 1.0), orient_normals, 0);
       TriMesh f2;
       std::vector<VertexStatus> st2;
-      FitReport rep2 = fit_once(templ, P_in, N_in, markers, roi, with_coarse, f2, st2, sub_progress(progress, 0.6, 1.0), orient_normals, 0);
+      FitReport rep2;
+      std::vector<FitReport::UnexplainedRegion> regions2;
+      if (before_detail) regions2 = run2.regions_now();
+      else rep2 = run2.finish(f2, st2), regions2 = rep2.unexplained;
       // kept when it leaves under half the unexplained points of the first fit (sums over the
       // regions: scattered outliers, which dominate any tail statistic of noisy scans, are not in
       // them; the margin keeps near-equal fits from flipping on rounding)
-      const Eigen::Index u1 = unexplained_points(rep), u2 = unexplained_points(rep2);
+      const Eigen::Index u1 = unexplained_points(regions1), u2 = unexplained_points(regions2);
       const bool better = 2 * u2 < u1;
-      char buf[320];
-      std::snprintf(buf, sizeof buf,
-                    "%zu region(s) of the cloud (%lld points) were left unexplained: fitted again with the coarse stage (400 nodes), "
-                    "which leaves %lld; %s kept. ",
-                    rep.unexplained.size(), static_cast<long long>(u1), static_cast<long long>(u2),
-                    better ? "the coarse stage's fit" : "the first fit");
-      logger()->info("[TemplateFitting] {}", buf);
       if (better) {
+        if (before_detail) rep2 = run2.finish(f2, st2);
         rep = std::move(rep2);
         fitted = std::move(f2);
         st = std::move(st2);
+      } else if (before_detail) {
+        rep = run1->finish(fitted, st);
       }
+      char buf[320];
+      std::snprintf(buf, sizeof buf,
+                    "%zu region(s) of the cloud (%lld points) were left unexplained%s: fitted again with the coarse stage (400 nodes), "
+                    "which leaves %lld; %s kept. ",
+                    regions1.size(), static_cast<long long>(u1), before_detail ? " before the detail rounds" : "", static_cast<long long>(u2),
+                    better ? "the coarse stage's fit" : "the first fit");
+      logger()->info("[TemplateFitting] {}", buf);
       rep.coarse_retry_unexplained = {u1, u2};
       rep.coarse_retried = true;
       rep.message = buf + rep.message;
-      rep.t_total = seconds_since(t_all);
+    } else if (before_detail) {
+      rep = run1->finish(fitted, st);
     }
-    if (may_retry) report_progress(progress, 1.0, "done");
+    run1.reset();
+    if (before_detail) require_a_match(rep, templ, P_in, !markers.empty());
+    if (may_retry) {
+      rep.t_total = seconds_since(t_all);
+      report_progress(progress, 1.0, "done");
+    }
     warn_if_crumpled(rep, templ);
     warn_if_unexplained(rep);
     result = std::move(fitted);
@@ -369,35 +424,46 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
   return rep;
 }
 
-FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
-                       const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
-                       TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                       bool orient_normals, int coarse_prepass, SharedWork* shared) {
-  const auto t_all = Clock::now();
-  // one BLAS thread: no contention with our OpenMP loops (blas_threads.h)
-  const ScopedBlasThreads blas_threads(1);
+FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const std::vector<FitMarker>& markers,
+               const RegionOfInterest& roi, const FitParameters& params, ProgressCallback progress, bool orient_normals,
+               int coarse_prepass, SharedWork* shared)
+    : t_all_(Clock::now()), blas_threads_(1), progress_(std::move(progress)) {
+  // (one BLAS thread: no contention with our OpenMP loops, blas_threads.h)
   check_fit_inputs(templ, P_in, N_in, params);
-  report_progress(progress, 0.0, "prepare");
-  std::optional<fit_impl::PreparedCloud> own;
-  std::optional<fit_impl::PreparedCloud>& cloud = shared ? shared->cloud : own;
+  report_progress(progress_, 0.0, "prepare");
+  std::optional<fit_impl::PreparedCloud>& cloud = shared ? shared->cloud : own_;
   if (!cloud) cloud = fit_impl::prepare_cloud(P_in, N_in, roi, params.normal_neighbours);
-  FitReport rep;
-  fit_impl::FitState s(templ, markers, progress, rep, status, *cloud);
+  s_ = std::make_unique<fit_impl::FitState>(templ, markers, progress_, rep_, status_, *cloud);
+  fit_impl::FitState& s = *s_;
   s.coarse_prepass = coarse_prepass;
   s.alignment_cache = shared ? &shared->alignment : nullptr;
   fit_impl::use_cloud(s, params, orient_normals);
   fit_impl::prepare_markers(s, P_in, roi);
-  TriMesh aligned;
   if (markers.empty() && params.align_without_markers) {  // a template roughly in place: similarity alignment first
-    report_progress(progress, 0.03, "alignment");
-    fit_impl::align_without_markers(s, aligned);
-    s.useTemplate(aligned);
+    report_progress(progress_, 0.03, "alignment");
+    fit_impl::align_without_markers(s, aligned_);
+    s.useTemplate(aligned_);
   }
   fit_impl::initial_pose(s);             // stage 1 (+ global scale)
   fit_impl::orient_cloud_normals(s);
   fit_impl::coarse_stage(s);
   fit_impl::iterate_fit(s);              // stage 2
   fit_impl::propagate_displacements(s);  // stage 3
+}
+
+std::vector<FitReport::UnexplainedRegion> FitRun::regions_now() const {
+  const fit_impl::FitState& s = *s_;
+  Eigen::MatrixX3d Q(s.cloud.np, 3);
+  Eigen::Index nq = 0;
+  for (Eigen::Index i = 0; i < s.cloud.np; ++i)
+    if (s.cloud.roi_ok[std::size_t(i)]) Q.row(nq++) = s.cloud.P.row(i);
+  Q.conservativeResize(nq, 3);
+  if (nq == 0) return {};
+  return fit_impl::unexplained_regions(Q, point_mesh_distances(s.V, s.F, Q), s.cloud.diag, s.u.max_match_distance);
+}
+
+FitReport FitRun::finish(TriMesh& result, std::vector<VertexStatus>& status) {
+  fit_impl::FitState& s = *s_;
   fit_impl::detail_rounds(s);
   const int known_crossings = fit_impl::repair_surface(s);
   fit_impl::compute_metrics(s, known_crossings);
@@ -405,9 +471,18 @@ FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eig
   result.F = s.F;
   result.N.resize(0, 3);
   result.C.resize(0, 3);
-  rep.t_total = seconds_since(t_all);
-  report_progress(progress, 1.0, "done");
-  return rep;
+  rep_.t_total = seconds_since(t_all_);
+  report_progress(progress_, 1.0, "done");
+  status = status_;
+  return rep_;
+}
+
+FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
+                   const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
+                   TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
+                   bool orient_normals, int coarse_prepass, SharedWork* shared) {
+  FitRun run(templ, P_in, N_in, markers, roi, params, progress, orient_normals, coarse_prepass, shared);
+  return run.finish(result, status);
 }
 
 }  // namespace

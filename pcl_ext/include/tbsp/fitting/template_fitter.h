@@ -147,7 +147,8 @@ struct FitParameters {
   /// (docs/fitting.md). With markers, −1 also runs the fit a second time with 400 nodes when the
   /// first leaves regions of the scan unexplained (FitReport::unexplained: a part the markers did
   /// not turn far enough) and keeps that fit when it leaves under half as many points unexplained
-  /// (FitReport::coarse_retried). 400 is the measured setting. −1, 0 (off) or 4..20000.
+  /// (FitReport::coarse_retried); with detail_rounds the regions are measured before the rounds
+  /// and only the kept fit runs them. 400 is the measured setting. −1, 0 (off) or 4..20000.
   int coarse_nodes = -1;
   /// Without markers (the auto_markers flow) and with the coarse stage on: one more hypothesis
   /// per entry. The whole fit runs once with the coarse_nodes graph alone and once per entry with
