@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <exception>
 #include <limits>
-#include <mutex>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <system_error>
 #include <thread>
@@ -130,7 +130,6 @@ void warn_if_crumpled(FitReport& rep, const TriMesh& templ) {
   logger()->warn("[TemplateFitting] {}", buf);
 }
 
-// The part [lo, hi] of `progress` (empty when `progress` is).
 // Points in the regions a fit left unexplained.
 Eigen::Index unexplained_points(const std::vector<FitReport::UnexplainedRegion>& regions) {
   Eigen::Index n = 0;
@@ -158,6 +157,7 @@ void warn_if_unexplained(FitReport& rep) {
   logger()->warn("[TemplateFitting] {}", msg);
 }
 
+// The part [lo, hi] of `progress` (empty when `progress` is).
 ProgressCallback sub_progress(const ProgressCallback& progress, double lo, double hi) {
   if (!progress) return {};
   return [&progress, lo, hi](double f, const std::string& stage) { return progress(lo + (hi - lo) * f, stage); };

@@ -302,9 +302,9 @@ struct FitReport {
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();  ///< their mean, cloud units
     double max_distance = 0;                           ///< the farthest one's distance to the result
   };
-  /// Groups of ROI points farther than 2 % of the bounding-box diagonal from the result (points
-  /// within 1 % of it of each other joined), each of at least max(30, 0.1 % of the ROI points),
-  /// largest first, at most 8. Typically a part of the template that stayed behind (an ear, a
+  /// Groups of ROI points farther than max(2 r_max, 1 % of the bounding-box diagonal) from the
+  /// result (points within half that of each other joined), each of at least max(30, 0.1 % of
+  /// the ROI points), largest first, at most 8. Typically a part of the template that stayed behind (an ear, a
   /// limb or a finger turned beyond the fit's reach: give a marker there) or data that are not
   /// the object (clutter: exclude it with the region of interest). Scattered outliers and noise
   /// do not form regions. A fit that leaves any is reported with a warning in `message`.
