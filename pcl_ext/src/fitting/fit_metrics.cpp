@@ -60,23 +60,32 @@ std::vector<FitReport::UnexplainedRegion> unexplained_regions(const Eigen::Matri
   return out;
 }
 
+Eigen::MatrixX3d roi_points(const PreparedCloud& c) {
+  Eigen::MatrixX3d Q(c.np, 3);
+  Eigen::Index nq = 0;
+  for (Eigen::Index i = 0; i < c.np; ++i)
+    if (c.roi_ok[std::size_t(i)]) Q.row(nq++) = c.P.row(i);
+  Q.conservativeResize(nq, 3);
+  return Q;
+}
+
+std::vector<FitReport::UnexplainedRegion> unexplained_regions(const FitState& s) {
+  const Eigen::MatrixX3d Q = roi_points(s.cloud);
+  if (Q.rows() == 0) return {};
+  return unexplained_regions(Q, point_mesh_distances(s.V, s.F, Q), s.cloud.diag, s.u.max_match_distance);
+}
+
 void compute_metrics(FitState& s, int known_crossings) {
   FitReport& rep = s.rep;
   const FitParameters& u = s.u;
   const Eigen::MatrixX3d& V = s.V;
   const Eigen::MatrixX3i& F = s.F;
-  const Eigen::MatrixX3d& P = s.cloud.P;
-  const std::vector<char>& roi_ok = s.cloud.roi_ok;
-  const Eigen::Index np = s.cloud.np;
   const double diag = s.cloud.diag;
   report_progress(s.progress, 0.95, "metrics");
   const auto t0 = Clock::now();
   {
-    Eigen::MatrixX3d Q(rep.points_total, 3);
-    Eigen::Index nq = 0;
-    for (Eigen::Index i = 0; i < np; ++i)
-      if (roi_ok[std::size_t(i)]) Q.row(nq++) = P.row(i);
-    Q.conservativeResize(nq, 3);
+    const Eigen::MatrixX3d Q = roi_points(s.cloud);
+    const Eigen::Index nq = Q.rows();
     const Eigen::VectorXd dist = point_mesh_distances(V, F, Q);
     rep.hausdorff = dist.maxCoeff();
     rep.hausdorff_rel = rep.hausdorff / diag;

@@ -215,6 +215,10 @@ int repair_surface(FitState& s);
 
 // ---- fit_metrics.cpp
 void compute_metrics(FitState& s, int known_crossings);
+/// The cloud's ROI points, in order.
+Eigen::MatrixX3d roi_points(const PreparedCloud& c);
+/// FitReport::unexplained of the current shape s.V (one point-to-mesh pass over the ROI points).
+std::vector<FitReport::UnexplainedRegion> unexplained_regions(const FitState& s);
 /// FitReport::unexplained of the ROI points Q and their distances to the result.
 std::vector<FitReport::UnexplainedRegion> unexplained_regions(const Eigen::MatrixX3d& Q, const Eigen::VectorXd& dist, double diag,
                                                               double r_max);

@@ -22,7 +22,6 @@
 #include "tbsp/core/logging.h"
 #include "tbsp/core/timer.h"
 #include "tbsp/mesh/mesh_validation.h"
-#include "tbsp/mesh/point_mesh_distance.h"
 #include "tbsp/mesh/point_search.h"
 #include "tbsp/solve/blas_threads.h"
 
@@ -184,28 +183,35 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     const bool before_detail = may_retry && params.detail_rounds > 0;
     const auto t_all = Clock::now();
     // one bar over both fits: never backwards (the first fit may finish after the second ran)
-    auto last = std::make_shared<double>(0.0);
-    const ProgressCallback mono = [progress, last](double f, const std::string& stage) {
-      *last = std::max(*last, f);
-      return progress ? progress(*last, stage) : true;
+    double last = 0;
+    const ProgressCallback mono = [&progress, &last](double f, const std::string& stage) {
+      last = std::max(last, f);
+      return progress ? progress(last, stage) : true;
     };
-    FitParameters with_coarse = params;
-    with_coarse.coarse_nodes = 400;
     FitReport rep;
-    std::unique_ptr<FitRun> run1 = std::make_unique<FitRun>(templ, P_in, N_in, markers, roi, params,
-                                                            may_retry ? sub_progress(mono, 0.0, 0.55) : progress, orient_normals, 0);
+    FitRun run1(templ, P_in, N_in, markers, roi, params, may_retry ? sub_progress(mono, 0.0, 0.55) : progress, orient_normals, 0);
     std::vector<FitReport::UnexplainedRegion> regions1;
-    if (before_detail) regions1 = run1->regions_now();
-    else rep = run1->finish(fitted, st), regions1 = rep.unexplained;
-    if (!before_detail) require_a_match(rep, templ, P_in, !markers.empty());
+    if (before_detail) {
+      regions1 = run1.regions_now();
+    } else {
+      rep = run1.finish(fitted, st);
+      regions1 = rep.unexplained;
+      require_a_match(rep, templ, P_in, !markers.empty());
+    }
     if (may_retry && !regions1.empty()) {
+      FitParameters with_coarse = params;
+      with_coarse.coarse_nodes = 400;
       FitRun run2(templ, P_in, N_in, markers, roi, with_coarse, sub_progress(mono, 0.55, 1.0), orient_normals, 0);
       TriMesh f2;
       std::vector<VertexStatus> st2;
       FitReport rep2;
       std::vector<FitReport::UnexplainedRegion> regions2;
-      if (before_detail) regions2 = run2.regions_now();
-      else rep2 = run2.finish(f2, st2), regions2 = rep2.unexplained;
+      if (before_detail) {
+        regions2 = run2.regions_now();
+      } else {
+        rep2 = run2.finish(f2, st2);
+        regions2 = rep2.unexplained;
+      }
       // kept when it leaves under half the unexplained points of the first fit (sums over the
       // regions: scattered outliers, which dominate any tail statistic of noisy scans, are not in
       // them; the margin keeps near-equal fits from flipping on rounding)
@@ -217,7 +223,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
         fitted = std::move(f2);
         st = std::move(st2);
       } else if (before_detail) {
-        rep = run1->finish(fitted, st);
+        rep = run1.finish(fitted, st);
       }
       char buf[320];
       std::snprintf(buf, sizeof buf,
@@ -230,9 +236,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       rep.coarse_retried = true;
       rep.message = buf + rep.message;
     } else if (before_detail) {
-      rep = run1->finish(fitted, st);
+      rep = run1.finish(fitted, st);
     }
-    run1.reset();
     if (before_detail) require_a_match(rep, templ, P_in, !markers.empty());
     if (may_retry) {
       rep.t_total = seconds_since(t_all);
@@ -451,16 +456,7 @@ FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::
   fit_impl::propagate_displacements(s);  // stage 3
 }
 
-std::vector<FitReport::UnexplainedRegion> FitRun::regions_now() const {
-  const fit_impl::FitState& s = *s_;
-  Eigen::MatrixX3d Q(s.cloud.np, 3);
-  Eigen::Index nq = 0;
-  for (Eigen::Index i = 0; i < s.cloud.np; ++i)
-    if (s.cloud.roi_ok[std::size_t(i)]) Q.row(nq++) = s.cloud.P.row(i);
-  Q.conservativeResize(nq, 3);
-  if (nq == 0) return {};
-  return fit_impl::unexplained_regions(Q, point_mesh_distances(s.V, s.F, Q), s.cloud.diag, s.u.max_match_distance);
-}
+std::vector<FitReport::UnexplainedRegion> FitRun::regions_now() const { return fit_impl::unexplained_regions(*s_); }
 
 FitReport FitRun::finish(TriMesh& result, std::vector<VertexStatus>& status) {
   fit_impl::FitState& s = *s_;

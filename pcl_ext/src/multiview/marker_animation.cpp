@@ -183,12 +183,13 @@ void MarkerAnimation::start() {
       src.col(Eigen::Index(i)) = rest.row(Eigen::Index(use[i])).transpose();
       dst.col(Eigen::Index(i)) = data_.block<1, 3>(f0, 3 * column_[use[i]]).transpose();
     }
-    if (!spans_a_plane(dst) || !spans_a_plane(src)) {
+    const bool dst_spans = spans_a_plane(dst);
+    if (!dst_spans || !spans_a_plane(src)) {
       std::string names;
       for (std::size_t i = 0; i < use.size() && i < 8; ++i) names += (i ? ", " : "") + map_[use[i]].marker;
       if (use.size() > 8) names += ", ...";
       throw InvalidInput(who + "the alignment markers (" + names + ") " +
-                         (spans_a_plane(dst) ? "map to template vertices" : "are, in frame " + std::to_string(f0) + " of the trajectories,") +
+                         (dst_spans ? "map to template vertices" : "are, in frame " + std::to_string(f0) + " of the trajectories,") +
                          " on one line or at one point: a similarity needs three that span a plane; mark more, spread-out entries "
                          "\"align\": true (or pose the template yourself and turn the alignment off: --no-align, MarkerAnimationOptions::align)");
     }
