@@ -188,16 +188,16 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       last = std::max(last, f);
       return progress ? progress(last, stage) : true;
     };
+    // where the retry is decided: before the detail rounds, or on the finished fit
+    auto checkpoint = [before_detail](FitRun& run, FitReport& r, TriMesh& m, std::vector<VertexStatus>& v) {
+      if (before_detail) return run.regions_now();
+      r = run.finish(m, v);
+      return r.unexplained;
+    };
     FitReport rep;
     FitRun run1(templ, P_in, N_in, markers, roi, params, may_retry ? sub_progress(mono, 0.0, 0.55) : progress, orient_normals, 0);
-    std::vector<FitReport::UnexplainedRegion> regions1;
-    if (before_detail) {
-      regions1 = run1.regions_now();
-    } else {
-      rep = run1.finish(fitted, st);
-      regions1 = rep.unexplained;
-      require_a_match(rep, templ, P_in, !markers.empty());
-    }
+    const std::vector<FitReport::UnexplainedRegion> regions1 = checkpoint(run1, rep, fitted, st);
+    if (!before_detail) require_a_match(rep, templ, P_in, !markers.empty());
     if (may_retry && !regions1.empty()) {
       FitParameters with_coarse = params;
       with_coarse.coarse_nodes = 400;
@@ -205,13 +205,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       TriMesh f2;
       std::vector<VertexStatus> st2;
       FitReport rep2;
-      std::vector<FitReport::UnexplainedRegion> regions2;
-      if (before_detail) {
-        regions2 = run2.regions_now();
-      } else {
-        rep2 = run2.finish(f2, st2);
-        regions2 = rep2.unexplained;
-      }
+      const std::vector<FitReport::UnexplainedRegion> regions2 = checkpoint(run2, rep2, f2, st2);
       // kept when it leaves under half the unexplained points of the first fit (sums over the
       // regions: scattered outliers, which dominate any tail statistic of noisy scans, are not in
       // them; the margin keeps near-equal fits from flipping on rounding)
