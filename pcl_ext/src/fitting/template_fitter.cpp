@@ -10,6 +10,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <string>
 #include <system_error>
 #include <thread>
 
@@ -36,6 +37,16 @@ struct SharedWork {
   std::optional<SimilarityIcpResult> alignment;
 };
 
+// What the coarse-stage retry of a fit with markers takes from the first fit: the same markers
+// pose the same template on the same cloud, so the initial deformation and the global scale
+// (stage 1) are those of the first fit; the coarse stage then replaces the deformer's rest shape,
+// so nothing else of stage 1 carries over. Results are identical to computing it again.
+struct InitialPose {
+  Eigen::MatrixX3d V;  ///< the posed template, scaled
+  double scale = 1, t_initial = 0, t_scale = 0;
+  std::string message;  ///< what stage 1 added to the report's message
+};
+
 // One fit in two parts: the constructor runs it up to the detail rounds (alignment, initial pose,
 // coarse stage, iterations, propagation), finish() does the rest (detail rounds, repair, metrics).
 // In between regions_now() tells which regions of the cloud the fit so far leaves unexplained, so
@@ -45,7 +56,7 @@ class FitRun {
 public:
   FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const std::vector<FitMarker>& markers,
          const RegionOfInterest& roi, const FitParameters& params, ProgressCallback progress, bool orient_normals, int coarse_prepass,
-         SharedWork* shared = nullptr);
+         SharedWork* shared = nullptr, InitialPose* pose = nullptr);
   FitRun(const FitRun&) = delete;
   FitRun& operator=(const FitRun&) = delete;
   /// FitReport::unexplained of the current shape (point_mesh_distances of the ROI points).
@@ -195,13 +206,17 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       return r.unexplained;
     };
     FitReport rep;
-    FitRun run1(templ, P_in, N_in, markers, roi, params, may_retry ? sub_progress(mono, 0.0, 0.55) : progress, orient_normals, 0);
+    // a retry shares the first fit's prepared cloud and stage 1
+    SharedWork shared;
+    InitialPose pose;
+    FitRun run1(templ, P_in, N_in, markers, roi, params, may_retry ? sub_progress(mono, 0.0, 0.55) : progress, orient_normals, 0,
+                may_retry ? &shared : nullptr, may_retry ? &pose : nullptr);
     const std::vector<FitReport::UnexplainedRegion> regions1 = checkpoint(run1, rep, fitted, st);
     if (!before_detail) require_a_match(rep, templ, P_in, !markers.empty());
     if (may_retry && !regions1.empty()) {
       FitParameters with_coarse = params;
       with_coarse.coarse_nodes = 400;
-      FitRun run2(templ, P_in, N_in, markers, roi, with_coarse, sub_progress(mono, 0.55, 1.0), orient_normals, 0);
+      FitRun run2(templ, P_in, N_in, markers, roi, with_coarse, sub_progress(mono, 0.55, 1.0), orient_normals, 0, &shared, &pose);
       TriMesh f2;
       std::vector<VertexStatus> st2;
       FitReport rep2;
@@ -425,7 +440,7 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
 
 FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const std::vector<FitMarker>& markers,
                const RegionOfInterest& roi, const FitParameters& params, ProgressCallback progress, bool orient_normals,
-               int coarse_prepass, SharedWork* shared)
+               int coarse_prepass, SharedWork* shared, InitialPose* pose)
     : t_all_(Clock::now()), blas_threads_(1), progress_(std::move(progress)) {
   // (one BLAS thread: no contention with our OpenMP loops, blas_threads.h)
   check_fit_inputs(templ, P_in, N_in, params);
@@ -443,7 +458,20 @@ FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::
     fit_impl::align_without_markers(s, aligned_);
     s.useTemplate(aligned_);
   }
-  fit_impl::initial_pose(s);             // stage 1 (+ global scale)
+  // stage 1 (+ global scale); `pose`: taken from the fit that filled it, or kept for the next
+  if (pose && pose->V.rows() == templ.V.rows() && s.u.coarse_nodes > 0 && !markers.empty()) {
+    s.V = pose->V;
+    s.V0 = s.V;
+    s.F = s.templ().F;
+    rep_.scale = pose->scale;
+    rep_.t_initial = pose->t_initial;
+    rep_.t_scale = pose->t_scale;
+    rep_.message += pose->message;
+  } else {
+    const std::size_t m0 = rep_.message.size();
+    fit_impl::initial_pose(s);
+    if (pose) *pose = {s.V, rep_.scale, rep_.t_initial, rep_.t_scale, rep_.message.substr(m0)};
+  }
   fit_impl::orient_cloud_normals(s);
   fit_impl::coarse_stage(s);
   fit_impl::iterate_fit(s);              // stage 2
