@@ -25,7 +25,7 @@ namespace {
 struct FitArgs {
   std::string templ, cloud, markers, out, status, report, roi, png;
   tbsp::FitParameters p;
-  bool no_prop = false, no_scale = false, no_field = false, quiet = false, kernel_detail = false, no_pleats = false;
+  bool no_prop = false, no_scale = false, no_field = false, quiet = false, kernel_detail = false, no_pleats = false, no_detail_pull = false;
 };
 
 int cmd_fit(FitArgs a) {
@@ -42,6 +42,7 @@ int cmd_fit(FitArgs a) {
   a.p.estimate_scale = !a.no_scale;
   a.p.rotation_field = !a.no_field;
   a.p.detail_residual_matching = !a.kernel_detail;
+  a.p.detail_pull_unexplained = !a.no_detail_pull;
   a.p.pleat_collapse = !a.no_pleats;
   if (a.p.coarse_prepass_nodes == std::vector<int>{0}) a.p.coarse_prepass_nodes.clear();  // --coarse-prepass-nodes 0
   tbsp::cli::ProgressBar bar(!a.quiet);
@@ -183,6 +184,8 @@ void add_fit_commands(CLI::App& app, CommandTable& table) {
                    "detail rounds: max angle (degrees) between a point's normal and the face it projects onto (default 40)");
   fitc->add_option("--detail-surface-weight", a->p.detail_surface_weight,
                    "weight of the detail rounds' per-face data constraints (default 0 = off)");
+  fitc->add_flag("--detail-no-pull", a->no_detail_pull,
+                 "detail rounds: points of unexplained regions pull only within r_max, as other points do (default: at any distance)");
   fitc->add_flag("--detail-kernel-targets", a->kernel_detail,
                  "detail rounds: the §5.3 kernel targets along the normals instead of residual matching");
   fitc->add_flag("--laplacian-updating", a->p.laplacian_updating, "§5.5.1: rebuild the Laplacian each iteration");

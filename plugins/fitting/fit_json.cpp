@@ -153,6 +153,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
                      {"detail_weight", u.detail_weight}, {"detail_surface_weight", u.detail_surface_weight},
                      {"detail_residual_matching", u.detail_residual_matching}, {"detail_radius_factor", u.detail_radius_factor},
+                     {"detail_pull_unexplained", u.detail_pull_unexplained},
                      {"detail_normal_angle_deg", u.detail_normal_angle_deg}, {"detail_tolerance", u.detail_tolerance},
                      {"detail_marker_weight", u.detail_marker_weight}, {"consistent_normals", u.consistent_normals},
                      {"coarse_nodes", u.coarse_nodes}, {"coarse_rounds", u.coarse_rounds}, {"coarse_steps", u.coarse_steps},
@@ -165,7 +166,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                  {"vertices", r.vertices}, {"faces", r.faces}, {"matched", r.matched}, {"propagated", r.propagated},
                  {"masked", r.masked}, {"detail_iterations_run", r.detail_iterations_run},
                  {"detail_surface_constraints", r.detail_surface_constraints},
-                 {"detail_points_tracked", r.detail_points_tracked}};
+                 {"detail_points_tracked", r.detail_points_tracked}, {"detail_rounds_pulling", r.detail_rounds_pulling}};
   j["metrics"] = {{"bbox_diagonal", r.bbox_diagonal}, {"point_spacing", r.point_spacing},
                   {"hausdorff", r.hausdorff}, {"hausdorff_relative", r.hausdorff_rel}, {"rms", r.rms},
                   {"mean", r.mean}, {"p99", r.p99}, {"tail_mean", r.tail_mean}, {"coverage_vertices", r.coverage_vertices},

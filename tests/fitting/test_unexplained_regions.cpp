@@ -74,6 +74,15 @@ TEST(UnexplainedRegions, DenseFarGroupsAreRegionsScatteredOrCloseOnesAreNot) {
   for (std::size_t i = 10500; i < 10600; ++i) m1 += P[i] / 100.0;
   EXPECT_LT((regions[0].centre - m0).norm(), 1e-12);
   EXPECT_LT((regions[1].centre - m1).norm(), 1e-12);
+  // membership (what the detail rounds pull with): exactly the blobs' points, by region index
+  std::vector<int> member;
+  const auto again = fit_impl::unexplained_regions(c.Q, c.d, 1.0, r_max, &member);
+  ASSERT_EQ(again.size(), 2u);
+  ASSERT_EQ(member.size(), P.size());
+  for (std::size_t i = 0; i < P.size(); ++i) {
+    const int want = i >= 10300 && i < 10500 ? 0 : i >= 10500 && i < 10600 ? 1 : -1;
+    ASSERT_EQ(member[i], want) << i;
+  }
   // the threshold follows the final match radius: with r_max 0.11 (far 0.22, joined within 0.11)
   // the 0.2 blob is explained and the 0.3 blob is the one region, with the few outliers within
   // 0.11 of it (measured: 11); the other outliers, 0.15 apart on average, join a few at a time

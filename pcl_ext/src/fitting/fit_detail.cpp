@@ -63,18 +63,46 @@ void detail_rounds(FitState& s) {
     std::vector<Eigen::Index> rk;  // cloud index of each tracked point
     std::vector<int> rf;           // its closest face
     Eigen::MatrixX3d rb;           // and the barycentric weights of its closest point
+    std::vector<double> rcap;      // per tracked point: the largest residual it may pull by
     if (u.detail_residual_matching) {
       const MeshDistance md(V, F);
       std::vector<int> face(std::size_t(np), -1);
+      Eigen::VectorXd dist = Eigen::VectorXd::Zero(np);
 #pragma omp parallel for schedule(dynamic, 1024)
       for (Eigen::Index i = 0; i < np; ++i) {
         if (!roi_ok[std::size_t(i)]) continue;
         int f = -1;
         const Eigen::Vector3d p = P.row(i).transpose();
-        if ((md.closest(p, &f) - p).norm() <= 3 * r) face[std::size_t(i)] = f;
+        dist(i) = (md.closest(p, &f) - p).norm();
+        face[std::size_t(i)] = f;
+      }
+      // points of the regions the fit leaves unexplained (a part the fit has not reached: the
+      // tip of a thin ear folded back) are tracked at any distance and pull by their whole
+      // residual; scattered far points (outliers) form no region and stay ignored
+      std::vector<double> cap(std::size_t(np), r);
+      if (u.detail_pull_unexplained) {
+        std::vector<Eigen::Index> qi;
+        for (Eigen::Index i = 0; i < np; ++i)
+          if (roi_ok[std::size_t(i)]) qi.push_back(i);
+        Eigen::MatrixX3d Q(Eigen::Index(qi.size()), 3);
+        Eigen::VectorXd dq(Eigen::Index(qi.size()));
+        for (std::size_t k = 0; k < qi.size(); ++k) { Q.row(Eigen::Index(k)) = P.row(qi[k]); dq(Eigen::Index(k)) = dist(qi[k]); }
+        std::vector<int> member;
+        const auto regions = unexplained_regions(Q, dq, s.cloud.diag, r, &member);
+        for (std::size_t k = 0; k < qi.size(); ++k)
+          if (member[k] >= 0) cap[std::size_t(qi[k])] = 1.5 * regions[std::size_t(member[k])].max_distance;
+        if (!regions.empty()) {
+          ++rep.detail_rounds_pulling;
+          logger()->debug("[TemplateFitting] detail round {}: {} unexplained region(s), {} points pull at any distance", round + 1,
+                          regions.size(), unexplained_points(regions));
+        }
       }
       for (Eigen::Index i = 0; i < np; ++i)
-        if (face[std::size_t(i)] >= 0) { rk.push_back(i); rf.push_back(face[std::size_t(i)]); }
+        if (face[std::size_t(i)] >= 0 && dist(i) <= std::max(3 * r, cap[std::size_t(i)])) {
+          rk.push_back(i);
+          rf.push_back(face[std::size_t(i)]);
+          rcap.push_back(cap[std::size_t(i)]);
+        }
       rb.resize(Eigen::Index(rk.size()), 3);
       for (std::size_t t = 0; t < rk.size(); ++t) {
         const int f = rf[t];
@@ -106,7 +134,7 @@ void detail_rounds(FitState& s) {
         const Eigen::Index ci = rk[std::size_t(t)];
         if (N.row(ci).dot(FNc.row(rf[std::size_t(t)])) < cos_detail) continue;
         const Eigen::Vector3d res = (P.row(ci) - C.row(t)).transpose();
-        if (res.squaredNorm() > r * r) continue;
+        if (res.norm() > rcap[std::size_t(t)]) continue;
         const double w = bspline_weight(std::sqrt(d2) / rd);
         a.sw += w;
         a.sw2 += w * w;

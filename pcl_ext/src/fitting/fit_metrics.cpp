@@ -16,7 +16,8 @@ namespace tbsp {
 namespace fit_impl {
 
 std::vector<FitReport::UnexplainedRegion> unexplained_regions(const Eigen::MatrixX3d& Q, const Eigen::VectorXd& dist, double diag,
-                                                              double r_max) {
+                                                              double r_max, std::vector<int>* member) {
+  if (member) member->assign(std::size_t(Q.rows()), -1);
   const double far = std::max(2 * r_max, 0.01 * diag), link = 0.5 * far;
   std::vector<Eigen::Index> idx;
   for (Eigen::Index i = 0; i < Q.rows(); ++i)
@@ -50,14 +51,32 @@ std::vector<FitReport::UnexplainedRegion> unexplained_regions(const Eigen::Matri
     r.max_distance = std::max(r.max_distance, dist(idx[std::size_t(k)]));
   }
   std::vector<FitReport::UnexplainedRegion> out;
-  for (auto& r : regions)
-    if (r.points >= Eigen::Index(min_points)) {
-      r.centre /= double(r.points);
-      out.push_back(r);
+  std::vector<Eigen::Index> root_of;  // per entry of out: its union-find root
+  for (std::size_t k = 0; k < regions.size(); ++k)
+    if (regions[k].points >= Eigen::Index(min_points)) {
+      regions[k].centre /= double(regions[k].points);
+      out.push_back(regions[k]);
+      root_of.push_back(Eigen::Index(k));
     }
-  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.points > b.points; });
-  if (out.size() > 8) out.resize(8);
-  return out;
+  std::vector<std::size_t> order(out.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return out[a].points > out[b].points; });
+  if (order.size() > 8) order.resize(8);
+  std::vector<FitReport::UnexplainedRegion> sorted;
+  std::vector<int> slot(idx.size(), -1);  // per union-find root: its index in `sorted`
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    sorted.push_back(out[order[k]]);
+    slot[std::size_t(root_of[order[k]])] = int(k);
+  }
+  if (member)
+    for (Eigen::Index k = 0; k < F.rows(); ++k) (*member)[std::size_t(idx[std::size_t(k)])] = slot[std::size_t(find(k))];
+  return sorted;
+}
+
+Eigen::Index unexplained_points(const std::vector<FitReport::UnexplainedRegion>& regions) {
+  Eigen::Index n = 0;
+  for (const auto& u : regions) n += u.points;
+  return n;
 }
 
 Eigen::MatrixX3d roi_points(const PreparedCloud& c) {

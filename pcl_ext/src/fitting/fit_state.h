@@ -219,9 +219,12 @@ void compute_metrics(FitState& s, int known_crossings);
 Eigen::MatrixX3d roi_points(const PreparedCloud& c);
 /// FitReport::unexplained of the current shape s.V (one point-to-mesh pass over the ROI points).
 std::vector<FitReport::UnexplainedRegion> unexplained_regions(const FitState& s);
-/// FitReport::unexplained of the ROI points Q and their distances to the result.
+/// Points in the regions (sum of their counts).
+Eigen::Index unexplained_points(const std::vector<FitReport::UnexplainedRegion>& regions);
+/// FitReport::unexplained of the ROI points Q and their distances to the result. `member`
+/// (optional): per row of Q, the index of the returned region it belongs to, or -1.
 std::vector<FitReport::UnexplainedRegion> unexplained_regions(const Eigen::MatrixX3d& Q, const Eigen::VectorXd& dist, double diag,
-                                                              double r_max);
+                                                              double r_max, std::vector<int>* member = nullptr);
 
 }  // namespace fit_impl
 }  // namespace tbsp

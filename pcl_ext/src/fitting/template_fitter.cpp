@@ -140,13 +140,6 @@ void warn_if_crumpled(FitReport& rep, const TriMesh& templ) {
   logger()->warn("[TemplateFitting] {}", buf);
 }
 
-// Points in the regions a fit left unexplained.
-Eigen::Index unexplained_points(const std::vector<FitReport::UnexplainedRegion>& regions) {
-  Eigen::Index n = 0;
-  for (const auto& u : regions) n += u.points;
-  return n;
-}
-
 // The warning for FitReport::unexplained: the largest region, where it is, what to do.
 void warn_if_unexplained(FitReport& rep) {
   if (rep.unexplained.empty()) return;
@@ -224,7 +217,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       // kept when it leaves under half the unexplained points of the first fit (sums over the
       // regions: scattered outliers, which dominate any tail statistic of noisy scans, are not in
       // them; the margin keeps near-equal fits from flipping on rounding)
-      const Eigen::Index u1 = unexplained_points(regions1), u2 = unexplained_points(regions2);
+      const Eigen::Index u1 = fit_impl::unexplained_points(regions1), u2 = fit_impl::unexplained_points(regions2);
       const bool better = 2 * u2 < u1;
       if (better) {
         if (before_detail) rep2 = run2.finish(f2, st2);

@@ -201,6 +201,13 @@ struct FitParameters {
   /// of the cloud → fit residuals, unbiased on curved surfaces and also sideways); false = the
   /// §5.3 kernel targets along the normal (+ detail_surface_weight). Default true.
   bool detail_residual_matching = true;
+  /// Residual matching: the points of regions the fit leaves unexplained (FitReport::unexplained,
+  /// recomputed each round: a part it has not reached, such as the tip of a thin ear folded
+  /// back) pull at any distance, by up to 1.5 × their region's farthest distance, instead of
+  /// only within r_max. Scattered far points (outliers) form no region and stay ignored; a
+  /// region of clutter would pull the surface towards it: exclude clutter with an ROI. Default
+  /// true.
+  bool detail_pull_unexplained = true;
   /// Kernel radius of residual matching, × r_max. Default 2. [0.5, 10].
   double detail_radius_factor = 2;
   /// Residual matching: a point counts only if its normal is within this angle (degrees) of the
@@ -333,6 +340,7 @@ struct FitReport {
   int detail_iterations_run = 0;         ///< matching / solve steps of the detail rounds, all rounds
   Eigen::Index detail_surface_constraints = 0;  ///< data -> surface constraints, all detail rounds
   Eigen::Index detail_points_tracked = 0;  ///< cloud points of the residual matching, last detail round
+  int detail_rounds_pulling = 0;  ///< detail rounds whose unexplained regions pulled (FitParameters::detail_pull_unexplained)
 };
 
 /// \brief Fits `templ` to the cloud P (#P by 3) with normals N (#P by 3, or 0 rows: then they
