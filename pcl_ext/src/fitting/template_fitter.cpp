@@ -40,7 +40,8 @@ struct SharedWork {
 // What the coarse-stage retry of a fit with markers takes from the first fit: the same markers
 // pose the same template on the same cloud, so the initial deformation and the global scale
 // (stage 1) are those of the first fit; the coarse stage then replaces the deformer's rest shape,
-// so nothing else of stage 1 carries over. Results are identical to computing it again.
+// so nothing else of stage 1 carries over. Results are identical to computing it again. Empty
+// (V without rows) until the first fit fills it; the retry's report gives the first fit's times.
 struct InitialPose {
   Eigen::MatrixX3d V;  ///< the posed template, scaled
   double scale = 1, t_initial = 0, t_scale = 0;
