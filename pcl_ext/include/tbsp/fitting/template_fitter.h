@@ -204,9 +204,10 @@ struct FitParameters {
   /// Residual matching: the points of regions the fit leaves unexplained (FitReport::unexplained,
   /// recomputed each round: a part it has not reached, such as the tip of a thin ear folded
   /// back) pull at any distance, by up to 1.5 × their region's farthest distance, instead of
-  /// only within r_max. Scattered far points (outliers) form no region and stay ignored; a
-  /// region of clutter would pull the surface towards it: exclude clutter with an ROI. Default
-  /// true.
+  /// only within r_max. Scattered far points (outliers) form no region and stay ignored; points
+  /// whose normal disagrees with the face they project onto (detail_normal_angle_deg) do not
+  /// pull, but a region of clutter facing the surface would pull it: exclude clutter with an
+  /// ROI. Default true.
   bool detail_pull_unexplained = true;
   /// Kernel radius of residual matching, × r_max. Default 2. [0.5, 10].
   double detail_radius_factor = 2;
