@@ -81,12 +81,12 @@ void detail_rounds(FitState& s) {
       // residual; scattered far points (outliers) form no region and stay ignored
       std::vector<double> cap(std::size_t(np), r);
       if (u.detail_pull_unexplained) {
-        std::vector<Eigen::Index> qi;
+        std::vector<Eigen::Index> qi;  // cloud index of each ROI point (the rows of roi_points)
         for (Eigen::Index i = 0; i < np; ++i)
           if (roi_ok[std::size_t(i)]) qi.push_back(i);
-        Eigen::MatrixX3d Q(Eigen::Index(qi.size()), 3);
-        Eigen::VectorXd dq(Eigen::Index(qi.size()));
-        for (std::size_t k = 0; k < qi.size(); ++k) { Q.row(Eigen::Index(k)) = P.row(qi[k]); dq(Eigen::Index(k)) = dist(qi[k]); }
+        const Eigen::MatrixX3d Q = roi_points(s.cloud);
+        Eigen::VectorXd dq(Q.rows());
+        for (std::size_t k = 0; k < qi.size(); ++k) dq(Eigen::Index(k)) = dist(qi[k]);
         std::vector<int> member;
         const auto regions = unexplained_regions(Q, dq, s.cloud.diag, r, &member);
         for (std::size_t k = 0; k < qi.size(); ++k)

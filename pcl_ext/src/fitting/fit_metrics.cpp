@@ -50,27 +50,22 @@ std::vector<FitReport::UnexplainedRegion> unexplained_regions(const Eigen::Matri
     r.centre += F.row(k).transpose();
     r.max_distance = std::max(r.max_distance, dist(idx[std::size_t(k)]));
   }
-  std::vector<FitReport::UnexplainedRegion> out;
-  std::vector<Eigen::Index> root_of;  // per entry of out: its union-find root
+  // the roots of the groups large enough, largest first (ties in root order), at most 8
+  std::vector<std::size_t> kept;
   for (std::size_t k = 0; k < regions.size(); ++k)
-    if (regions[k].points >= Eigen::Index(min_points)) {
-      regions[k].centre /= double(regions[k].points);
-      out.push_back(regions[k]);
-      root_of.push_back(Eigen::Index(k));
-    }
-  std::vector<std::size_t> order(out.size());
-  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return out[a].points > out[b].points; });
-  if (order.size() > 8) order.resize(8);
-  std::vector<FitReport::UnexplainedRegion> sorted;
-  std::vector<int> slot(idx.size(), -1);  // per union-find root: its index in `sorted`
-  for (std::size_t k = 0; k < order.size(); ++k) {
-    sorted.push_back(out[order[k]]);
-    slot[std::size_t(root_of[order[k]])] = int(k);
+    if (regions[k].points >= Eigen::Index(min_points)) kept.push_back(k);
+  std::stable_sort(kept.begin(), kept.end(), [&](std::size_t a, std::size_t b) { return regions[a].points > regions[b].points; });
+  if (kept.size() > 8) kept.resize(8);
+  std::vector<FitReport::UnexplainedRegion> out;
+  std::vector<int> slot(idx.size(), -1);  // per union-find root: its index in `out`
+  for (std::size_t k : kept) {
+    regions[k].centre /= double(regions[k].points);
+    slot[k] = int(out.size());
+    out.push_back(regions[k]);
   }
   if (member)
     for (Eigen::Index k = 0; k < F.rows(); ++k) (*member)[std::size_t(idx[std::size_t(k)])] = slot[std::size_t(find(k))];
-  return sorted;
+  return out;
 }
 
 Eigen::Index unexplained_points(const std::vector<FitReport::UnexplainedRegion>& regions) {
