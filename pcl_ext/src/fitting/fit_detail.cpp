@@ -10,9 +10,32 @@
 #include "tbsp/core/timer.h"
 #include "tbsp/mesh/cotan_laplacian.h"
 #include "tbsp/mesh/point_mesh_distance.h"
+#include "tbsp/mesh/radius_grid.h"
 
 namespace tbsp {
 namespace fit_impl {
+
+namespace {
+
+// The faces around the corners of each face, each once, in the order the corners' face lists
+// give them (corner 0's faces first): where a tracked point's closest point is looked for after
+// the fit moved a little. The first of equally close faces wins, as over the lists with repeats.
+std::vector<std::vector<int>> face_neighbourhoods(Eigen::Index nv, const Eigen::MatrixX3i& F) {
+  std::vector<std::vector<int>> vf(static_cast<std::size_t>(nv));  // faces around each vertex
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) vf[std::size_t(F(f, c))].push_back(int(f));
+  std::vector<std::vector<int>> near(std::size_t(F.rows()));
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    std::vector<int>& out = near[std::size_t(f)];
+    for (int c = 0; c < 3; ++c)
+      for (int g : vf[std::size_t(F(f, c))])
+        if (std::find(out.begin(), out.end(), g) == out.end()) out.push_back(g);
+  }
+  return near;
+}
+
+}  // namespace
 
 // Detail rounds (beyond the thesis; FitParameters::detail_rounds): §5.5.1's Laplacian
 // updating after the §5.3 fit, with everything the data does not support held where the fit
@@ -43,9 +66,7 @@ void detail_rounds(FitState& s) {
   const double r = u.max_match_distance;
   const double rd = u.detail_radius_factor * r;  // kernel radius of the residual matching
   const double cos_detail = std::cos(u.detail_normal_angle_deg * M_PI / 180.0);
-  std::vector<std::vector<int>> vf(std::size_t(V.rows()));  // faces around each vertex
-  for (Eigen::Index f = 0; f < F.rows(); ++f)
-    for (int c = 0; c < 3; ++c) vf[std::size_t(F(f, c))].push_back(int(f));
+  const std::vector<std::vector<int>> near = face_neighbourhoods(V.rows(), F);
   LaplacianDeformer Dd;  // one for all rounds: the solver keeps its symbolic analysis
   Dd.setUseRotationField(false);
   for (int round = 0; round < u.detail_rounds; ++round) {
@@ -121,60 +142,65 @@ void detail_rounds(FitState& s) {
     };
     // kernel sums of the residual matching at v: Σw, Σw², Σw (p_k − c_k) over the tracked points
     // whose closest point c_k lies within r_d of v, whose normal is within
-    // detail_normal_angle_deg of their face's and whose residual is at most r
+    // detail_normal_angle_deg of their face's and whose residual is at most their cap
     struct ResidualSums {
       double sw = 0, sw2 = 0;
       Eigen::Vector3d sr = Eigen::Vector3d::Zero();
     };
-    auto residual_sums = [&](const PointSearch& cs, const Eigen::MatrixX3d& C, const Eigen::MatrixX3d& FNc,
-                             const Eigen::Vector3d& v, std::vector<std::pair<Eigen::Index, double>>& nb) {
+    // the tracked points that pass the normal and residual tests (they do not depend on the
+    // vertex asking), their residuals and a search over their closest points on the current fit:
+    // built for the support weights and reused by the first iteration (the fit has not moved in
+    // between), rebuilt after every solve
+    struct ResidualIndex {
+      Eigen::MatrixX3d R;  // residual p_k − c_k of each kept point
+      RadiusGrid grid;     // over the kept points' c_k, cells r_d wide
+    };
+    auto index_residuals = [&]() {
+      const Eigen::MatrixX3d C = tracked_closest();
+      const Eigen::MatrixX3d FN = face_normals(V, F);
+      std::vector<Eigen::Index> keep;
+      keep.reserve(rk.size());
+      for (std::size_t t = 0; t < rk.size(); ++t) {
+        const Eigen::Index ci = rk[t];
+        if (N.row(ci).dot(FN.row(rf[t])) < cos_detail) continue;
+        if ((P.row(ci) - C.row(Eigen::Index(t))).norm() > rcap[t]) continue;
+        keep.push_back(Eigen::Index(t));
+      }
+      ResidualIndex x;
+      Eigen::MatrixX3d Ck(Eigen::Index(keep.size()), 3);
+      x.R.resize(Eigen::Index(keep.size()), 3);
+      for (std::size_t k = 0; k < keep.size(); ++k) {
+        Ck.row(Eigen::Index(k)) = C.row(keep[k]);
+        x.R.row(Eigen::Index(k)) = P.row(rk[std::size_t(keep[k])]) - C.row(keep[k]);
+      }
+      x.grid = RadiusGrid(Ck, rd);
+      return x;
+    };
+    auto residual_sums = [&](const ResidualIndex& x, const Eigen::Vector3d& v) {
       ResidualSums a;
-      cs.radius(v, rd, nb);
-      for (const auto& [t, d2] : nb) {
-        const Eigen::Index ci = rk[std::size_t(t)];
-        if (N.row(ci).dot(FNc.row(rf[std::size_t(t)])) < cos_detail) continue;
-        const Eigen::Vector3d res = (P.row(ci) - C.row(t)).transpose();
-        if (res.norm() > rcap[std::size_t(t)]) continue;
+      x.grid.forEachWithin(v, [&](Eigen::Index k, double d2) {
         const double w = bspline_weight(std::sqrt(d2) / rd);
         a.sw += w;
         a.sw2 += w * w;
-        a.sr += w * res;
-      }
+        a.sr += w * x.R.row(k).transpose();
+      });
       return a;
     };
     // sparse support, as in stage 2: a vertex whose residual kernel holds fewer than
     // support_points × (r_d / r)² effective points (the count stage 2's kernel would see in the
     // same patch) gets least-squares weight ∝ n_eff — at the rim of holes one or two noisy
     // points otherwise pull it off the surface
-    // the tracked points' closest points on the current fit, a search over them and the face
-    // normals: built for the support weights and reused by the first iteration (the fit has
-    // not moved in between), rebuilt after every solve
-    struct ResidualIndex {
-      Eigen::MatrixX3d C, FN;
-      PointSearch search;
-    };
-    auto index_residuals = [&]() {
-      ResidualIndex x;
-      x.C = tracked_closest();
-      x.search = PointSearch(x.C);
-      x.FN = face_normals(V, F);
-      return x;
-    };
     std::optional<ResidualIndex> index;
     Eigen::VectorXd dscale = Eigen::VectorXd::Ones(V.rows());
     if (u.detail_residual_matching && u.support_points > 0) {
       const double need = u.support_points * (rd / r) * (rd / r);
       index = index_residuals();
       const ResidualIndex& x = *index;
-#pragma omp parallel
-      {
-        std::vector<std::pair<Eigen::Index, double>> nb;
-#pragma omp for schedule(dynamic, 256)
-        for (Eigen::Index j = 0; j < V.rows(); ++j) {
-          if (status[std::size_t(j)] != VertexStatus::Matched) continue;
-          const ResidualSums a = residual_sums(x.search, x.C, x.FN, V.row(j).transpose(), nb);
-          dscale(j) = a.sw2 > 0 ? std::min(1.0, a.sw * a.sw / a.sw2 / need) : 1.0;
-        }
+#pragma omp parallel for schedule(dynamic, 256)
+      for (Eigen::Index j = 0; j < V.rows(); ++j) {
+        if (status[std::size_t(j)] != VertexStatus::Matched) continue;
+        const ResidualSums a = residual_sums(x, V.row(j).transpose());
+        dscale(j) = a.sw2 > 0 ? std::min(1.0, a.sw * a.sw / a.sw2 / need) : 1.0;
       }
     }
     std::vector<int> ids(std::size_t(V.rows()), -1);
@@ -222,7 +248,6 @@ void detail_rounds(FitState& s) {
                     round + 1, seconds_since(t_round), rep.detail_surface_constraints, rk.size());
     int k = 0;
     for (; k < u.detail_iterations; ++k) {
-      const Eigen::MatrixX3d VN = vertex_normals(V, F);
       Eigen::MatrixX3d T = Eigen::MatrixX3d::Constant(V.rows(), 3, std::numeric_limits<double>::quiet_NaN());
       if (u.detail_residual_matching) {
         if (k > 0) {
@@ -232,33 +257,29 @@ void detail_rounds(FitState& s) {
             const Eigen::Vector3d p = P.row(rk[std::size_t(t)]).transpose();
             const int f0 = rf[std::size_t(t)];
             double best = std::numeric_limits<double>::infinity();
-            for (int c = 0; c < 3; ++c)
-              for (int f : vf[std::size_t(F(f0, c))]) {
-                const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), e = V.row(F(f, 2)).transpose();
-                const Eigen::Vector3d w = closest_point_barycentric(p, a, b, e);
-                const double d2 = (p - (w(0) * a + w(1) * b + w(2) * e)).squaredNorm();
-                if (d2 < best) { best = d2; rf[std::size_t(t)] = f; rb.row(t) = w.transpose(); }
-              }
+            for (int f : near[std::size_t(f0)]) {
+              const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), e = V.row(F(f, 2)).transpose();
+              const Eigen::Vector3d w = closest_point_barycentric(p, a, b, e);
+              const double d2 = (p - (w(0) * a + w(1) * b + w(2) * e)).squaredNorm();
+              if (d2 < best) { best = d2; rf[std::size_t(t)] = f; rb.row(t) = w.transpose(); }
+            }
           }
         }
         // target = vertex + kernel-weighted mean of the residuals p_k - c_k
         if (k > 0 || !index) index = index_residuals();
         const ResidualIndex& x = *index;
-#pragma omp parallel
-        {
-          std::vector<std::pair<Eigen::Index, double>> nb;
-#pragma omp for schedule(dynamic, 256)
-          for (Eigen::Index j = 0; j < V.rows(); ++j) {
-            if (ids[std::size_t(j)] < 0) continue;
-            const Eigen::Vector3d vj = V.row(j).transpose();
-            const ResidualSums a = residual_sums(x.search, x.C, x.FN, vj, nb);
-            if (a.sw <= 0) continue;
-            Eigen::Vector3d m = a.sr / a.sw;
-            if (m.norm() > r) m *= r / m.norm();
-            T.row(j) = (vj + m).transpose();
-          }
+#pragma omp parallel for schedule(dynamic, 256)
+        for (Eigen::Index j = 0; j < V.rows(); ++j) {
+          if (ids[std::size_t(j)] < 0) continue;
+          const Eigen::Vector3d vj = V.row(j).transpose();
+          const ResidualSums a = residual_sums(x, vj);
+          if (a.sw <= 0) continue;
+          Eigen::Vector3d m = a.sr / a.sw;
+          if (m.norm() > r) m *= r / m.norm();
+          T.row(j) = (vj + m).transpose();
         }
       } else {
+        const Eigen::MatrixX3d VN = vertex_normals(V, F);
 #pragma omp parallel
         {
           std::vector<std::pair<Eigen::Index, double>> nb;

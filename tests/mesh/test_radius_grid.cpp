@@ -1,0 +1,98 @@
+// RadiusGrid: the same neighbours as nanoflann's radius search, a fixed order, clear errors.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <limits>
+#include <random>
+#include <utility>
+#include <vector>
+
+#include "tbsp/core/error.h"
+#include "tbsp/mesh/point_search.h"
+#include "tbsp/mesh/radius_grid.h"
+
+using namespace tbsp;
+
+namespace {
+std::vector<std::pair<Eigen::Index, double>> grid_neighbours(const RadiusGrid& g, const Eigen::Vector3d& q) {
+  std::vector<std::pair<Eigen::Index, double>> out;
+  g.forEachWithin(q, [&](Eigen::Index i, double d2) { out.emplace_back(i, d2); });
+  return out;
+}
+}  // namespace
+
+TEST(RadiusGrid, FindsTheSamePointsAsTheKdTree) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Eigen::MatrixX3d P(3000, 3);
+  for (Eigen::Index i = 0; i < P.rows(); ++i) {
+    // a sheet (as a scan) and some points off it; a few exact duplicates
+    const double x = u(rng), y = u(rng);
+    P.row(i) << x, y, (i % 5 == 0) ? u(rng) : 0.1 * x * y;
+  }
+  P.row(10) = P.row(11);
+  const PointSearch tree(P);
+  for (const double r : {0.02, 0.1, 0.37, 5.0}) {
+    const RadiusGrid g(P, r);
+    EXPECT_EQ(g.size(), 3000u);
+    std::vector<std::pair<Eigen::Index, double>> want;
+    for (int q = 0; q < 300; ++q) {
+      // queries inside the box, at its faces and well outside it
+      const double s = q < 200 ? 1.0 : 1.5;
+      const Eigen::Vector3d p(s * u(rng), s * u(rng), s * u(rng));
+      tree.radius(p, r, want);
+      auto got = grid_neighbours(g, p);
+      std::sort(want.begin(), want.end());
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got.size(), want.size()) << "radius " << r << " query " << q;
+      for (std::size_t k = 0; k < got.size(); ++k) {
+        EXPECT_EQ(got[k].first, want[k].first);
+        EXPECT_NEAR(got[k].second, want[k].second, 1e-15);
+      }
+    }
+  }
+}
+
+TEST(RadiusGrid, VisitsInTheSameOrderEveryTime) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0, 1);
+  Eigen::MatrixX3d P(2000, 3);
+  for (Eigen::Index i = 0; i < P.rows(); ++i) P.row(i) << u(rng), u(rng), u(rng);
+  const RadiusGrid a(P, 0.2), b(P, 0.2);
+  const Eigen::Vector3d q(0.5, 0.4, 0.6);
+  const auto na = grid_neighbours(a, q), nb = grid_neighbours(b, q);
+  ASSERT_GT(na.size(), 50u);
+  EXPECT_EQ(na, nb);
+}
+
+TEST(RadiusGrid, SkipsNonFiniteRowsAndHandlesEmptySets) {
+  Eigen::MatrixX3d P(4, 3);
+  P << 0, 0, 0, std::numeric_limits<double>::quiet_NaN(), 0, 0, 1, 1, 1, 0.05, 0, 0;
+  const RadiusGrid g(P, 0.1);
+  EXPECT_EQ(g.size(), 3u);
+  auto n = grid_neighbours(g, Eigen::Vector3d(0.02, 0, 0));
+  std::sort(n.begin(), n.end());
+  ASSERT_EQ(n.size(), 2u);
+  EXPECT_EQ(n[0].first, 0);
+  EXPECT_EQ(n[1].first, 3);
+  EXPECT_TRUE(grid_neighbours(g, Eigen::Vector3d(std::numeric_limits<double>::infinity(), 0, 0)).empty());
+  const RadiusGrid empty(Eigen::MatrixX3d(0, 3), 1.0);
+  EXPECT_EQ(empty.size(), 0u);
+  EXPECT_TRUE(grid_neighbours(empty, Eigen::Vector3d::Zero()).empty());
+  const RadiusGrid none;
+  EXPECT_TRUE(grid_neighbours(none, Eigen::Vector3d::Zero()).empty());
+}
+
+TEST(RadiusGrid, RejectsBadRadiiWithAClearError) {
+  Eigen::MatrixX3d P(2, 3);
+  P << 0, 0, 0, 1, 0, 0;
+  EXPECT_THROW(RadiusGrid(P, 0.0), InvalidInput);
+  EXPECT_THROW(RadiusGrid(P, -1.0), InvalidInput);
+  EXPECT_THROW(RadiusGrid(P, std::numeric_limits<double>::quiet_NaN()), InvalidInput);
+  try {
+    RadiusGrid(P, 1e-9);
+    FAIL() << "a radius a billionth of the extent must be refused";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("too small"), std::string::npos) << e.what();
+  }
+}
