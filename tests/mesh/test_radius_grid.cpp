@@ -96,3 +96,21 @@ TEST(RadiusGrid, RejectsBadRadiiWithAClearError) {
     EXPECT_NE(std::string(e.what()).find("too small"), std::string::npos) << e.what();
   }
 }
+
+TEST(RadiusGrid, SlotsNameTheRowsInStorageOrder) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  Eigen::MatrixX3d P(500, 3);
+  for (Eigen::Index i = 0; i < P.rows(); ++i) P.row(i) << u(rng), u(rng), u(rng);
+  const RadiusGrid g(P, 0.15);
+  ASSERT_EQ(g.rows().size(), 500u);
+  std::vector<std::uint32_t> sorted = g.rows();
+  std::sort(sorted.begin(), sorted.end());
+  for (std::uint32_t i = 0; i < 500; ++i) EXPECT_EQ(sorted[i], i);  // each row once
+  const Eigen::Vector3d q(0.3, 0.6, 0.5);
+  std::vector<std::pair<Eigen::Index, double>> by_row, by_slot;
+  g.forEachWithin(q, [&](Eigen::Index i, double d2) { by_row.emplace_back(i, d2); });
+  g.forEachSlotWithin(q, [&](std::size_t s, double d2) { by_slot.emplace_back(Eigen::Index(g.rows()[s]), d2); });
+  ASSERT_FALSE(by_row.empty());
+  EXPECT_EQ(by_row, by_slot);
+}

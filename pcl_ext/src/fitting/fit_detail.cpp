@@ -35,6 +35,31 @@ std::vector<std::vector<int>> face_neighbourhoods(Eigen::Index nv, const Eigen::
   return near;
 }
 
+// Bounding spheres of the faces (centroid and farthest corner): a lower bound of a point's
+// distance to a face that costs one subtraction and norm.
+class FaceSpheres {
+public:
+  FaceSpheres(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) : s_(F.rows(), 4) {
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index f = 0; f < F.rows(); ++f) {
+      const Eigen::RowVector3d c = (V.row(F(f, 0)) + V.row(F(f, 1)) + V.row(F(f, 2))) / 3.0;
+      double r2 = 0;
+      for (int k = 0; k < 3; ++k) r2 = std::max(r2, (V.row(F(f, k)) - c).squaredNorm());
+      s_.row(f) << c, std::sqrt(r2);
+    }
+  }
+  // true when every point of face f is surely farther than sqrt(d2) from p (a margin of 1e-9 of
+  // the distances involved covers the rounding of the bound)
+  bool fartherThan(int f, const Eigen::Vector3d& p, double d2) const {
+    const double dc = (p - s_.row(f).head<3>().transpose()).norm();
+    const double lb = dc - s_(f, 3) - 1e-9 * (dc + s_(f, 3));
+    return lb > 0 && lb * lb > d2;
+  }
+
+private:
+  Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor> s_;
+};
+
 }  // namespace
 
 // Detail rounds (beyond the thesis; FitParameters::detail_rounds): §5.5.1's Laplacian
@@ -131,10 +156,19 @@ void detail_rounds(FitState& s) {
                                                       V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose()).transpose();
       }
     }
+    // the tracked points in the order of their faces at the round's start: the loops over them
+    // read the mesh in order instead of at random (each point's result is its own)
+    std::vector<Eigen::Index> by_face(rk.size());
+    for (std::size_t t = 0; t < rk.size(); ++t) by_face[t] = Eigen::Index(t);
+    std::sort(by_face.begin(), by_face.end(), [&](Eigen::Index a, Eigen::Index b) {
+      return rf[std::size_t(a)] != rf[std::size_t(b)] ? rf[std::size_t(a)] < rf[std::size_t(b)] : a < b;
+    });
     // the tracked points' closest points on the current fit
     auto tracked_closest = [&]() {
       Eigen::MatrixX3d C(Eigen::Index(rk.size()), 3);
-      for (Eigen::Index t = 0; t < C.rows(); ++t) {
+#pragma omp parallel for schedule(static)
+      for (Eigen::Index i = 0; i < C.rows(); ++i) {
+        const Eigen::Index t = by_face[std::size_t(i)];
         const int f = rf[std::size_t(t)];
         C.row(t) = rb(t, 0) * V.row(F(f, 0)) + rb(t, 1) * V.row(F(f, 1)) + rb(t, 2) * V.row(F(f, 2));
       }
@@ -152,7 +186,7 @@ void detail_rounds(FitState& s) {
     // built for the support weights and reused by the first iteration (the fit has not moved in
     // between), rebuilt after every solve
     struct ResidualIndex {
-      Eigen::MatrixX3d R;  // residual p_k − c_k of each kept point
+      Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> R;  // residual p_k − c_k of each kept point, in the grid's slot order
       RadiusGrid grid;     // over the kept points' c_k, cells r_d wide
     };
     auto index_residuals = [&]() {
@@ -168,21 +202,22 @@ void detail_rounds(FitState& s) {
       }
       ResidualIndex x;
       Eigen::MatrixX3d Ck(Eigen::Index(keep.size()), 3);
-      x.R.resize(Eigen::Index(keep.size()), 3);
-      for (std::size_t k = 0; k < keep.size(); ++k) {
-        Ck.row(Eigen::Index(k)) = C.row(keep[k]);
-        x.R.row(Eigen::Index(k)) = P.row(rk[std::size_t(keep[k])]) - C.row(keep[k]);
-      }
+      for (std::size_t k = 0; k < keep.size(); ++k) Ck.row(Eigen::Index(k)) = C.row(keep[k]);
       x.grid = RadiusGrid(Ck, rd);
+      x.R.resize(Eigen::Index(keep.size()), 3);  // in the grid's order
+      for (std::size_t slot = 0; slot < keep.size(); ++slot) {
+        const Eigen::Index t = keep[x.grid.rows()[slot]];
+        x.R.row(Eigen::Index(slot)) = P.row(rk[std::size_t(t)]) - C.row(t);
+      }
       return x;
     };
     auto residual_sums = [&](const ResidualIndex& x, const Eigen::Vector3d& v) {
       ResidualSums a;
-      x.grid.forEachWithin(v, [&](Eigen::Index k, double d2) {
+      x.grid.forEachSlotWithin(v, [&](std::size_t slot, double d2) {
         const double w = bspline_weight(std::sqrt(d2) / rd);
         a.sw += w;
         a.sw2 += w * w;
-        a.sr += w * x.R.row(k).transpose();
+        a.sr += w * x.R.row(Eigen::Index(slot)).transpose();
       });
       return a;
     };
@@ -252,15 +287,29 @@ void detail_rounds(FitState& s) {
       if (u.detail_residual_matching) {
         if (k > 0) {
           // the fit moved a little: each point's closest point among the faces around its last one
+          // (the first of equally close ones in near's order). A face whose bounding sphere is
+          // farther from the point than its last face is skipped: it cannot be the closest.
+          const FaceSpheres spheres(V, F);
 #pragma omp parallel for schedule(dynamic, 1024)
-          for (Eigen::Index t = 0; t < Eigen::Index(rk.size()); ++t) {
+          for (Eigen::Index i = 0; i < Eigen::Index(rk.size()); ++i) {
+            const Eigen::Index t = by_face[std::size_t(i)];
             const Eigen::Vector3d p = P.row(rk[std::size_t(t)]).transpose();
             const int f0 = rf[std::size_t(t)];
+            const auto on_face = [&](int f, Eigen::Vector3d& w) {
+              const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), e = V.row(F(f, 2)).transpose();
+              w = closest_point_barycentric(p, a, b, e);
+              return (p - (w(0) * a + w(1) * b + w(2) * e)).squaredNorm();
+            };
+            Eigen::Vector3d w0;
+            const double d0 = on_face(f0, w0);
             double best = std::numeric_limits<double>::infinity();
             for (int f : near[std::size_t(f0)]) {
-              const Eigen::Vector3d a = V.row(F(f, 0)).transpose(), b = V.row(F(f, 1)).transpose(), e = V.row(F(f, 2)).transpose();
-              const Eigen::Vector3d w = closest_point_barycentric(p, a, b, e);
-              const double d2 = (p - (w(0) * a + w(1) * b + w(2) * e)).squaredNorm();
+              Eigen::Vector3d w = w0;
+              double d2 = d0;
+              if (f != f0) {
+                if (spheres.fartherThan(f, p, d0)) continue;
+                d2 = on_face(f, w);
+              }
               if (d2 < best) { best = d2; rf[std::size_t(t)] = f; rb.row(t) = w.transpose(); }
             }
           }

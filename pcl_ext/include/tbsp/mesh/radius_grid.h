@@ -36,6 +36,16 @@ public:
   /// Thread-safe (const). q may be anywhere, also outside the points' bounding box.
   template <class Fn>
   void forEachWithin(const Eigen::Vector3d& q, Fn&& f) const {
+    forEachSlotWithin(q, [&](std::size_t slot, double d2) { f(Eigen::Index(index_[slot]), d2); });
+  }
+
+  /// The rows of P in the order the grid stores them (cell by cell): slot s holds row rows()[s].
+  const std::vector<std::uint32_t>& rows() const { return index_; }
+
+  /// \brief As forEachWithin, but calls f(slot, d2) with the point's slot in rows(): data the
+  /// caller keeps in slot order are read in the order the grid scans them (cache-friendly).
+  template <class Fn>
+  void forEachSlotWithin(const Eigen::Vector3d& q, Fn&& f) const {
     if (index_.empty() || !q.allFinite()) return;
     const double r2 = radius_ * radius_;
     std::int64_t c[3];
@@ -52,7 +62,7 @@ public:
           for (std::uint32_t k = start_[std::size_t(cell)]; k < start_[std::size_t(cell) + 1]; ++k) {
             const double dx = xyz_[3 * k] - q(0), dy = xyz_[3 * k + 1] - q(1), dz = xyz_[3 * k + 2] - q(2);
             const double d2 = dx * dx + dy * dy + dz * dz;
-            if (d2 < r2) f(Eigen::Index(index_[k]), d2);
+            if (d2 < r2) f(std::size_t(k), d2);
           }
         }
   }
