@@ -221,6 +221,13 @@ void detail_rounds(FitState& s) {
       });
       return a;
     };
+    // the vertices in the order of the grid cells they start the round in: the vertex loops
+    // below read the residual grid in order (each vertex's result is its own)
+    std::vector<Eigen::Index> by_cell;
+    if (u.detail_residual_matching) {
+      const RadiusGrid cells(V, rd);
+      by_cell.assign(cells.rows().begin(), cells.rows().end());
+    }
     // sparse support, as in stage 2: a vertex whose residual kernel holds fewer than
     // support_points × (r_d / r)² effective points (the count stage 2's kernel would see in the
     // same patch) gets least-squares weight ∝ n_eff — at the rim of holes one or two noisy
@@ -232,7 +239,8 @@ void detail_rounds(FitState& s) {
       index = index_residuals();
       const ResidualIndex& x = *index;
 #pragma omp parallel for schedule(dynamic, 256)
-      for (Eigen::Index j = 0; j < V.rows(); ++j) {
+      for (Eigen::Index i = 0; i < Eigen::Index(by_cell.size()); ++i) {
+        const Eigen::Index j = by_cell[std::size_t(i)];
         if (status[std::size_t(j)] != VertexStatus::Matched) continue;
         const ResidualSums a = residual_sums(x, V.row(j).transpose());
         dscale(j) = a.sw2 > 0 ? std::min(1.0, a.sw * a.sw / a.sw2 / need) : 1.0;
@@ -318,7 +326,8 @@ void detail_rounds(FitState& s) {
         if (k > 0 || !index) index = index_residuals();
         const ResidualIndex& x = *index;
 #pragma omp parallel for schedule(dynamic, 256)
-        for (Eigen::Index j = 0; j < V.rows(); ++j) {
+        for (Eigen::Index i = 0; i < Eigen::Index(by_cell.size()); ++i) {
+          const Eigen::Index j = by_cell[std::size_t(i)];
           if (ids[std::size_t(j)] < 0) continue;
           const Eigen::Vector3d vj = V.row(j).transpose();
           const ResidualSums a = residual_sums(x, vj);

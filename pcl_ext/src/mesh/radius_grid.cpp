@@ -33,20 +33,15 @@ RadiusGrid::RadiusGrid(const Eigen::MatrixX3d& P, double radius) : radius_(radiu
   }
   if (rows.empty()) return;
   lo_ = lo;
-  for (int d = 0; d < 3; ++d) {
-    const double cells = std::floor((hi(d) - lo(d)) / radius) + 1;
-    if (!(cells <= double(kMaxCells)))
-      throw InvalidInput("[tbsp::RadiusGrid] radius " + std::to_string(radius) + " is too small for points spread over " +
-                         std::to_string(hi(d) - lo(d)) + " along axis " + std::to_string(d) +
-                         " (more than 2^20 cells); use PointSearch");
-    dims_[d] = std::int64_t(cells);
-  }
+  cell_ = radius;
+  for (int d = 0; d < 3; ++d) cell_ = std::max(cell_, (hi(d) - lo(d)) / double(kMaxCells - 1));
+  for (int d = 0; d < 3; ++d) dims_[d] = std::min(kMaxCells, std::int64_t(std::floor((hi(d) - lo(d)) / cell_)) + 1);
   // cell key of every point, sorted (ties by row: a fixed order)
   std::vector<std::pair<std::uint64_t, std::uint32_t>> kr(rows.size());
   for (std::size_t k = 0; k < rows.size(); ++k) {
     std::int64_t c[3];
     for (int d = 0; d < 3; ++d)
-      c[d] = std::min<std::int64_t>(dims_[d] - 1, std::int64_t(std::floor((P(rows[k], d) - lo(d)) / radius)));
+      c[d] = std::min<std::int64_t>(dims_[d] - 1, std::int64_t(std::floor((P(rows[k], d) - lo(d)) / cell_)));
     kr[k] = {std::uint64_t((c[2] * dims_[1] + c[1]) * dims_[0] + c[0]), rows[k]};
   }
   std::sort(kr.begin(), kr.end());

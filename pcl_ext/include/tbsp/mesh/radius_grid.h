@@ -21,9 +21,10 @@ class RadiusGrid {
 public:
   RadiusGrid() = default;
   /// \brief Indexes the rows of P (copied) for queries of radius `radius` (> 0, in P's units).
-  /// Non-finite rows are left out. O(n log n) time, O(n) memory.
-  /// \throws InvalidInput for radius ≤ 0 or non-finite, or a grid wider than 2^20 cells along
-  /// an axis (radius below a millionth of the points' extent).
+  /// Non-finite rows are left out. O(n log n) time, O(n) memory. The cells are `radius` wide, or
+  /// wider where that would make more than 2^20 cells along an axis (a radius below a millionth
+  /// of the points' extent: still correct, the queries scan more points).
+  /// \throws InvalidInput for radius ≤ 0 or non-finite.
   RadiusGrid(const Eigen::MatrixX3d& P, double radius);
 
   /// The radius the grid was built for.
@@ -50,7 +51,7 @@ public:
     const double r2 = radius_ * radius_;
     std::int64_t c[3];
     for (int d = 0; d < 3; ++d) {
-      const double x = std::floor((q(d) - lo_(d)) / radius_);
+      const double x = std::floor((q(d) - lo_(d)) / cell_);
       if (x < -1 || x > double(dims_[d])) return;  // no cell within one radius
       c[d] = std::int64_t(x);
     }
@@ -71,6 +72,7 @@ private:
   std::int64_t find(std::int64_t x, std::int64_t y, std::int64_t z) const;
 
   double radius_ = 0;
+  double cell_ = 0;  // cell width: radius_, or wider for very small radii
   Eigen::Vector3d lo_ = Eigen::Vector3d::Zero();
   std::int64_t dims_[3] = {0, 0, 0};
   std::vector<double> xyz_;            // the points, cell by cell
