@@ -99,7 +99,8 @@ void expect_exact(const TriMesh& m, const Eigen::Vector3d& centre, double extent
   // rounding: relative to the extent, and to the coordinates (CGAL's arithmetic at 1e4 loses
   // ~1e-13 absolute to cancellation)
   const double tol = 1e-12 * extent + 1e-15 * m.V.cwiseAbs().maxCoeff();
-  const Eigen::VectorXd fast = point_mesh_distances(m.V, m.F, Q);
+  Eigen::VectorXi fast_faces;
+  const Eigen::VectorXd fast = point_mesh_distances(m.V, m.F, Q, &fast_faces);
   Eigen::VectorXi faces;
   const Eigen::VectorXd cgal = MeshDistance(m.V, m.F).distances(Q, &faces);
   for (Eigen::Index i = 0; i < Q.rows(); ++i) {
@@ -110,6 +111,11 @@ void expect_exact(const TriMesh& m, const Eigen::Vector3d& centre, double extent
     const Eigen::Index f = faces(i);  // the face MeshDistance reports holds a closest point
     const Eigen::Vector3d a = m.V.row(m.F(f, 0)).transpose(), b = m.V.row(m.F(f, 1)).transpose(), c = m.V.row(m.F(f, 2)).transpose();
     EXPECT_NEAR((at(closest_point_barycentric(p, a, b, c), a, b, c) - p).norm(), ref, tol) << "query " << i;
+    const Eigen::Index g = fast_faces(i);  // and so does the one point_mesh_distances reports
+    ASSERT_TRUE(g >= 0 && g < m.F.rows()) << "query " << i;
+    const Eigen::Vector3d ga = m.V.row(m.F(g, 0)).transpose(), gb = m.V.row(m.F(g, 1)).transpose(),
+                          gc = m.V.row(m.F(g, 2)).transpose();
+    EXPECT_NEAR((at(closest_point_barycentric(p, ga, gb, gc), ga, gb, gc) - p).norm(), ref, tol) << "query " << i;
   }
 }
 }  // namespace
@@ -132,6 +138,26 @@ TEST(PointMeshDistances, StayExactFarFromTheOrigin) {
   expect_exact(s, Eigen::Vector3d(1e4, -2e4, 3e3), 0.01, 13);
 }
 
+TEST(PointMeshDistances, EquallyCloseFacesGiveTheLowestIndex) {
+  // a fan of 6 faces around vertex 0 in the plane z = 0; a query above the centre is equally
+  // close to all of them, one above an edge to the two that share it
+  Eigen::MatrixX3d V(7, 3);
+  V.row(0) << 0, 0, 0;
+  for (int k = 0; k < 6; ++k) V.row(k + 1) << std::cos(k * M_PI / 3), std::sin(k * M_PI / 3), 0;
+  Eigen::MatrixX3i F(6, 3);
+  for (int k = 0; k < 6; ++k) F.row(5 - k) << 0, k + 1, (k + 1) % 6 + 1;  // reversed: index order != fan order
+  Eigen::MatrixX3d Q(2, 3);
+  Q << 0, 0, 0.5, 0.5 * V(2, 0), 0.5 * V(2, 1), 0.25;  // above vertex 0; above the edge 0-2
+  Eigen::VectorXi faces;
+  const Eigen::VectorXd d = point_mesh_distances(V, F, Q, &faces);
+  EXPECT_NEAR(d(0), 0.5, 1e-15);
+  EXPECT_EQ(faces(0), 0);
+  // the edge 0-2 is shared by fan faces k = 0 (row 5) and k = 1 (row 4): one of them (the lower
+  // index where their rounded distances tie)
+  EXPECT_NEAR(d(1), 0.25, 1e-15);
+  EXPECT_TRUE(faces(1) == 4 || faces(1) == 5) << faces(1);
+}
+
 TEST(PointMeshDistances, DegenerateFacesNonFiniteQueriesAndBadInput) {
   Eigen::MatrixX3d V(4, 3);
   V << 0, 0, 0, 1, 0, 0, 2, 0, 0, 0, 1, 0;
@@ -144,6 +170,9 @@ TEST(PointMeshDistances, DegenerateFacesNonFiniteQueriesAndBadInput) {
   EXPECT_NEAR(d(0), std::sqrt(0.25 + 1), 1e-15);
   EXPECT_NEAR(d(1), 1.0, 1e-15);
   EXPECT_TRUE(std::isnan(d(2)));
+  Eigen::VectorXi faces;
+  point_mesh_distances(V, F, Q, &faces);
+  EXPECT_EQ(faces(2), -1);  // no face for a non-finite query
   // bad meshes: the message names the face or the vertex
   F(1, 2) = 4;
   try {

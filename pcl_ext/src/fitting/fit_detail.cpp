@@ -111,17 +111,14 @@ void detail_rounds(FitState& s) {
     Eigen::MatrixX3d rb;           // and the barycentric weights of its closest point
     std::vector<double> rcap;      // per tracked point: the largest residual it may pull by
     if (u.detail_residual_matching) {
-      const MeshDistance md(V, F);
-      std::vector<int> face(std::size_t(np), -1);
-      Eigen::VectorXd dist = Eigen::VectorXd::Zero(np);
-#pragma omp parallel for schedule(dynamic, 1024)
-      for (Eigen::Index i = 0; i < np; ++i) {
-        if (!roi_ok[std::size_t(i)]) continue;
-        int f = -1;
-        const Eigen::Vector3d p = P.row(i).transpose();
-        dist(i) = (md.closest(p, &f) - p).norm();
-        face[std::size_t(i)] = f;
-      }
+      // every ROI point's distance and closest face (Embree; the lowest of equally close faces)
+      Eigen::MatrixX3d Proi = Eigen::MatrixX3d::Constant(np, 3, std::numeric_limits<double>::quiet_NaN());
+      for (Eigen::Index i = 0; i < np; ++i)
+        if (roi_ok[std::size_t(i)]) Proi.row(i) = P.row(i);
+      Eigen::VectorXi face;
+      Eigen::VectorXd dist = point_mesh_distances(V, F, Proi, &face);
+      for (Eigen::Index i = 0; i < np; ++i)
+        if (!roi_ok[std::size_t(i)]) dist(i) = 0;
       // points of the regions the fit leaves unexplained (a part the fit has not reached: the
       // tip of a thin ear folded back) are tracked at any distance and pull by their whole
       // residual; scattered far points (outliers) form no region and stay ignored
@@ -144,9 +141,9 @@ void detail_rounds(FitState& s) {
         }
       }
       for (Eigen::Index i = 0; i < np; ++i)
-        if (face[std::size_t(i)] >= 0 && dist(i) <= std::max(3 * r, cap[std::size_t(i)])) {
+        if (face(i) >= 0 && dist(i) <= std::max(3 * r, cap[std::size_t(i)])) {
           rk.push_back(i);
-          rf.push_back(face[std::size_t(i)]);
+          rf.push_back(face(i));
           rcap.push_back(cap[std::size_t(i)]);
         }
       rb.resize(Eigen::Index(rk.size()), 3);

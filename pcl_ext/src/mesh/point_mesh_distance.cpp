@@ -144,6 +144,7 @@ struct Query {
   Eigen::Vector3d q;
   double margin;  // added to the float query radius: Embree culls in single precision
   double d = std::numeric_limits<double>::infinity();
+  int face = -1;  // of the closest point; the lowest index among equally close faces
 };
 
 void face_bounds(const RTCBoundsFunctionArguments* args) {
@@ -172,15 +173,17 @@ bool face_query(RTCPointQueryFunctionArguments* args) {
                         c = m.V.row(m.F(f, 2)).transpose();
   const Eigen::Vector3d w = closest_point_barycentric(r->q, a, b, c);
   const double d = (w(0) * a + w(1) * b + w(2) * c - r->q).norm();
-  if (!(d < r->d)) return false;
+  if (!(d < r->d || (d == r->d && int(f) < r->face))) return false;
   r->d = d;
+  r->face = int(f);
   args->query->radius = round_up(d + r->margin);  // shrink the search sphere
   return true;
 }
 
 }  // namespace
 
-Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P) {
+Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P,
+                                     Eigen::VectorXi* faces) {
   const std::string who = "[tbsp::point_mesh_distances] ";
   if (F.rows() == 0) throw InvalidInput(who + "the mesh has no faces");
   for (Eigen::Index f = 0; f < F.rows(); ++f)
@@ -212,6 +215,7 @@ Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::Mat
                            std::to_string(int(e)) + (e == RTC_ERROR_OUT_OF_MEMORY ? ": out of memory)" : ")"));
   }
   Eigen::VectorXd d(P.rows());
+  if (faces) faces->setConstant(P.rows(), -1);
 #pragma omp parallel for schedule(dynamic, 256)
   for (Eigen::Index i = 0; i < P.rows(); ++i) {
     const Eigen::Vector3d q = P.row(i).transpose();
@@ -232,6 +236,7 @@ Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::Mat
     rtcInitPointQueryContext(&context);
     rtcPointQuery(scene, &pq, &context, face_query, &r);
     d(i) = r.d;
+    if (faces) (*faces)(i) = r.face;
   }
   rtcReleaseScene(scene);
   return d;

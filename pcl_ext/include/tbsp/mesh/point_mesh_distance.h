@@ -1,7 +1,7 @@
 #pragma once
 /// \file point_mesh_distance.h
 /// \brief Exact point-to-triangle-mesh distances: CGAL's AABB tree (closest point and face), and
-/// Embree's BVH for distances alone (point_mesh_distances, ~3x faster).
+/// Embree's BVH for distances and closest faces of many points (point_mesh_distances, ~3x faster).
 
 #include <Eigen/Core>
 #include <memory>
@@ -40,9 +40,12 @@ private:
 /// radius padded by 1e-6 of the largest coordinate) only picks the candidates. Builds the tree
 /// (~0.04 s for 86k faces), queries in parallel (OpenMP; ~1 µs per point near the surface),
 /// frees it. Agrees with MeshDistance::distances to ~1e-15 at about a third of its time (the
-/// fitter's report on 100k points: 0.39 -> 0.15 s). No face index: use MeshDistance for that.
+/// fitter's report on 100k points: 0.39 -> 0.15 s). `faces`, when given, receives each point's
+/// closest face (-1 for a non-finite row); of equally close faces (a closest point on a shared
+/// edge or vertex) the lowest index, whatever order the tree is searched in.
 /// \throws InvalidInput for no faces, a face index out of range or a non-finite vertex (the
 /// message names the face / vertex); NumericalFailure if Embree cannot build the tree.
-Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P);
+Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P,
+                                     Eigen::VectorXi* faces = nullptr);
 
 }  // namespace tbsp
