@@ -13,7 +13,7 @@
 //     floor of a rigidity prior (a deformation graph driven by the true positions outside the hole)
 //   --coarse N / --coarse-stiffness A0 A1 / --coarse-rounds N / --coarse-steps N / --coarse-radius R /
 //   --coarse-angle DEG / --coarse-point-weight W / --coarse-prepass N[,N...]: the coarse stage (FitParameters::coarse_*);
-//   --refine-rotations, --detail-rounds N, --detail-no-pull, --max-iterations N: as FitParameters
+//   --refine-rotations, --detail-rounds N, --pull-rounds N, --detail-no-pull, --max-iterations N: as FitParameters
 // Times are the median of N runs (default 3; this machine is shared and noisy); the 43k row
 // also prints where the time goes (median stage times).
 // Rows (each GT scenario also with FitParameters::detail_rounds = 4): real single-view scan
@@ -146,6 +146,7 @@ int main(int argc, char** argv) {
     else if (a == "--rim-rejection" && i + 1 < argc) base.rim_rejection = std::atof(argv[++i]);
     else if (a == "--refine-rotations") base.refine_rotations = true;
     else if (a == "--detail-rounds" && i + 1 < argc) base.detail_rounds = std::atoi(argv[++i]);
+    else if (a == "--pull-rounds" && i + 1 < argc) base.pull_rounds = std::atoi(argv[++i]);
     else if (a == "--detail-no-pull") base.detail_pull_unexplained = false;
     else if (a == "--articulated" && i + 1 < argc) articulated.push_back(std::atof(argv[++i]));
     else if (a == "--save-target" && i + 1 < argc) save_target = argv[++i];
@@ -172,7 +173,7 @@ int main(int argc, char** argv) {
     }
     else {
       std::fprintf(stderr, "usage: bench_fit [-v|--verbose] [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N] "
-                           "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--detail-no-pull] [--max-iterations N] "
+                           "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--pull-rounds N] [--detail-no-pull] [--max-iterations N] "
                            "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--hole-axis 0|1|2] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
                            "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W] [--coarse-prepass N[,N...]]\n");
       return 2;

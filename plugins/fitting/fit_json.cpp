@@ -150,7 +150,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                      {"check_self_intersections", u.check_self_intersections},
                      {"radius_steps", u.radius_steps}, {"freeze_constraints", u.freeze_constraints},
                      {"freeze_iteration", u.freeze_iteration}, {"relaxation", u.relaxation},
-                     {"detail_rounds", u.detail_rounds}, {"detail_iterations", u.detail_iterations},
+                     {"detail_rounds", u.detail_rounds}, {"pull_rounds", u.pull_rounds}, {"detail_iterations", u.detail_iterations},
                      {"detail_weight", u.detail_weight}, {"detail_surface_weight", u.detail_surface_weight},
                      {"detail_residual_matching", u.detail_residual_matching}, {"detail_radius_factor", u.detail_radius_factor},
                      {"detail_pull_unexplained", u.detail_pull_unexplained},
@@ -166,7 +166,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
                  {"vertices", r.vertices}, {"faces", r.faces}, {"matched", r.matched}, {"propagated", r.propagated},
                  {"masked", r.masked}, {"detail_iterations_run", r.detail_iterations_run},
                  {"detail_surface_constraints", r.detail_surface_constraints},
-                 {"detail_points_tracked", r.detail_points_tracked}, {"detail_rounds_pulling", r.detail_rounds_pulling}};
+                 {"detail_points_tracked", r.detail_points_tracked}, {"detail_rounds_pulling", r.detail_rounds_pulling}, {"pull_rounds_run", r.pull_rounds_run}};
   j["metrics"] = {{"bbox_diagonal", r.bbox_diagonal}, {"point_spacing", r.point_spacing},
                   {"hausdorff", r.hausdorff}, {"hausdorff_relative", r.hausdorff_rel}, {"rms", r.rms},
                   {"mean", r.mean}, {"p99", r.p99}, {"tail_mean", r.tail_mean}, {"coverage_vertices", r.coverage_vertices},
@@ -183,7 +183,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
   j["timings_s"] = {{"normals", r.t_normals},     {"search_structure", r.t_search}, {"initial_deformation", r.t_initial},
                     {"coarse_stage", r.t_coarse},
                     {"global_scale", r.t_scale},  {"iterations", r.t_iterations},   {"matching", r.t_matching},
-                    {"solve", r.t_solve},         {"propagation", r.t_propagation}, {"detail", r.t_detail},
+                    {"solve", r.t_solve},         {"propagation", r.t_propagation}, {"detail", r.t_detail}, {"pull", r.t_pull},
                     {"remeshing", r.t_remeshing},
                     {"fairing", r.t_fairing},     {"metrics", r.t_metrics},         {"total", r.t_total}};
   return j;

@@ -60,6 +60,29 @@ private:
   Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor> s_;
 };
 
+// The vertices within reach of the unexplained regions (pull rounds): closer than 1.5 × the
+// farthest region's distance + the kernel radius r_d to one of the regions' points.
+std::vector<char> near_regions(const Eigen::MatrixX3d& V, const Eigen::MatrixX3d& Q, const std::vector<int>& member,
+                               const std::vector<FitReport::UnexplainedRegion>& regions, double rd) {
+  double reach = 0;
+  for (const auto& g : regions) reach = std::max(reach, 1.5 * g.max_distance);
+  reach += rd;
+  std::vector<Eigen::Index> rows;
+  for (std::size_t k = 0; k < member.size(); ++k)
+    if (member[k] >= 0) rows.push_back(Eigen::Index(k));
+  Eigen::MatrixX3d R(Eigen::Index(rows.size()), 3);
+  for (std::size_t k = 0; k < rows.size(); ++k) R.row(Eigen::Index(k)) = Q.row(rows[k]);
+  const RadiusGrid grid(R, reach);
+  std::vector<char> out(std::size_t(V.rows()), 0);
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index j = 0; j < V.rows(); ++j) {
+    bool found = false;
+    grid.forEachWithin(V.row(j).transpose(), [&](Eigen::Index, double) { found = true; });
+    out[std::size_t(j)] = found;
+  }
+  return out;
+}
+
 }  // namespace
 
 // Detail rounds (beyond the thesis; FitParameters::detail_rounds): §5.5.1's Laplacian
@@ -71,12 +94,12 @@ private:
 // current position with match_weight (the semantic hole filling stays) and, with
 // detail_surface_weight, faces to the cloud points that project onto them; it factorizes once
 // and iterates matching + back-substitution.
-void detail_rounds(FitState& s) {
+// `local` (pull rounds, FitParameters::pull_rounds): only the vertices near the regions the fit
+// leaves unexplained move, every other one is held where the fit put it; the rounds stop when
+// no region is left.
+static void run_rounds(FitState& s, int rounds, bool local) {
   FitParameters& u = s.u;
   FitReport& rep = s.rep;
-  if (u.detail_rounds > 0 && (u.laplacian_updating || u.remeshing))
-    rep.message += "detail rounds skipped: Laplacian updating already regularizes with the current shape. ";
-  if (!(u.detail_rounds > 0 && u.max_iterations > 0 && !u.laplacian_updating && !u.remeshing)) return;
   Eigen::MatrixX3d& V = s.V;
   const Eigen::MatrixX3i& F = s.F;
   const Eigen::MatrixX3d& P = s.cloud.P;
@@ -94,7 +117,12 @@ void detail_rounds(FitState& s) {
   const std::vector<std::vector<int>> near = face_neighbourhoods(V.rows(), F);
   LaplacianDeformer Dd;  // one for all rounds: the solver keeps its symbolic analysis
   Dd.setUseRotationField(false);
-  for (int round = 0; round < u.detail_rounds; ++round) {
+  // local: the points of any round's regions keep pulling (by their first region's reach) and
+  // the vertices near them keep moving, so a part is drawn in all the way and not only until
+  // its points fall below the region threshold
+  std::vector<double> pulled_cap;
+  std::vector<char> pulled_near;
+  for (int round = 0; round < rounds; ++round) {
     TriMesh cur;
     cur.V = V;
     cur.F = F;
@@ -110,6 +138,8 @@ void detail_rounds(FitState& s) {
     std::vector<int> rf;           // its closest face
     Eigen::MatrixX3d rb;           // and the barycentric weights of its closest point
     std::vector<double> rcap;      // per tracked point: the largest residual it may pull by
+    std::vector<char> movable(std::size_t(V.rows()), 1);  // local: the vertices near a region
+    bool nothing_to_pull = false;
     if (u.detail_residual_matching) {
       // every ROI point's distance and closest face (Embree; the lowest of equally close faces)
       Eigen::MatrixX3d Proi = Eigen::MatrixX3d::Constant(np, 3, std::numeric_limits<double>::quiet_NaN());
@@ -123,7 +153,8 @@ void detail_rounds(FitState& s) {
       // tip of a thin ear folded back) are tracked at any distance and pull by their whole
       // residual; scattered far points (outliers) form no region and stay ignored
       std::vector<double> cap(std::size_t(np), r);
-      if (u.detail_pull_unexplained) {
+      std::vector<char> in_region(std::size_t(np), 0);
+      if (u.detail_pull_unexplained || local) {
         std::vector<Eigen::Index> qi;  // cloud index of each ROI point (the rows of roi_points)
         for (Eigen::Index i = 0; i < np; ++i)
           if (roi_ok[std::size_t(i)]) qi.push_back(i);
@@ -133,19 +164,48 @@ void detail_rounds(FitState& s) {
         std::vector<int> member;
         const auto regions = unexplained_regions(Q, dq, s.cloud.diag, r, &member);
         for (std::size_t k = 0; k < qi.size(); ++k)
-          if (member[k] >= 0) cap[std::size_t(qi[k])] = 1.5 * regions[std::size_t(member[k])].max_distance;
-        if (!regions.empty()) {
+          if (member[k] >= 0) {
+            cap[std::size_t(qi[k])] = 1.5 * regions[std::size_t(member[k])].max_distance;
+            in_region[std::size_t(qi[k])] = 1;
+          }
+        if (local) {
+          if (pulled_cap.empty()) {
+            pulled_cap.assign(std::size_t(np), 0.0);
+            pulled_near.assign(std::size_t(V.rows()), 0);
+          }
+          for (Eigen::Index i = 0; i < np; ++i)
+            if (in_region[std::size_t(i)]) pulled_cap[std::size_t(i)] = std::max(pulled_cap[std::size_t(i)], cap[std::size_t(i)]);
+          if (!regions.empty()) {
+            const std::vector<char> near = near_regions(V, Q, member, regions, rd);
+            for (std::size_t j = 0; j < near.size(); ++j) pulled_near[j] = pulled_near[j] || near[j];
+          }
+          for (Eigen::Index i = 0; i < np; ++i)
+            if (pulled_cap[std::size_t(i)] > 0) {
+              cap[std::size_t(i)] = std::max(cap[std::size_t(i)], pulled_cap[std::size_t(i)]);
+              in_region[std::size_t(i)] = 1;
+            }
+          movable = pulled_near;
+          nothing_to_pull = std::find(movable.begin(), movable.end(), char(1)) == movable.end();
+        }
+        if (!regions.empty() && !local) {
           ++rep.detail_rounds_pulling;
           logger()->debug("[TemplateFitting] detail round {}: {} unexplained region(s), {} points pull at any distance", round + 1,
                           regions.size(), unexplained_points(regions));
         }
       }
+      // local: only the points that can reach a vertex that moves
+      auto reaches = [&](Eigen::Index i) {
+        if (!local || in_region[std::size_t(i)]) return true;
+        const int f = face(i);
+        return bool(movable[std::size_t(F(f, 0))] || movable[std::size_t(F(f, 1))] || movable[std::size_t(F(f, 2))]);
+      };
       for (Eigen::Index i = 0; i < np; ++i)
-        if (face(i) >= 0 && dist(i) <= std::max(3 * r, cap[std::size_t(i)])) {
+        if (face(i) >= 0 && dist(i) <= std::max(3 * r, cap[std::size_t(i)]) && reaches(i)) {
           rk.push_back(i);
           rf.push_back(face(i));
           rcap.push_back(cap[std::size_t(i)]);
         }
+      if (nothing_to_pull) break;
       rb.resize(Eigen::Index(rk.size()), 3);
       for (std::size_t t = 0; t < rk.size(); ++t) {
         const int f = rf[t];
@@ -238,7 +298,7 @@ void detail_rounds(FitState& s) {
 #pragma omp parallel for schedule(dynamic, 256)
       for (Eigen::Index i = 0; i < Eigen::Index(by_cell.size()); ++i) {
         const Eigen::Index j = by_cell[std::size_t(i)];
-        if (status[std::size_t(j)] != VertexStatus::Matched) continue;
+        if (status[std::size_t(j)] != VertexStatus::Matched || !movable[std::size_t(j)]) continue;
         const ResidualSums a = residual_sums(x, V.row(j).transpose());
         dscale(j) = a.sw2 > 0 ? std::min(1.0, a.sw * a.sw / a.sw2 / need) : 1.0;
       }
@@ -248,7 +308,7 @@ void detail_rounds(FitState& s) {
       const bool data = status[std::size_t(j)] == VertexStatus::Matched;
       const int id = Dd.addPositionConstraint(SurfacePoint::atVertex(int(j)), V.row(j).transpose(),
                                               data ? u.detail_weight * std::sqrt(dscale(j)) : u.match_weight);
-      if (data) ids[std::size_t(j)] = id;
+      if (data && movable[std::size_t(j)]) ids[std::size_t(j)] = id;  // held otherwise
     }
     std::vector<char> is_data(std::size_t(V.rows()), 0);
     for (Eigen::Index j = 0; j < V.rows(); ++j) is_data[std::size_t(j)] = ids[std::size_t(j)] >= 0;
@@ -283,7 +343,7 @@ void detail_rounds(FitState& s) {
         ++rep.detail_surface_constraints;
       }
     }
-    rep.detail_points_tracked = Eigen::Index(rk.size());
+    if (!local) rep.detail_points_tracked = Eigen::Index(rk.size());
     logger()->trace("[TemplateFitting] detail round {}: set-up {:.3f} s ({} data -> surface constraints, {} points tracked)",
                     round + 1, seconds_since(t_round), rep.detail_surface_constraints, rk.size());
     int k = 0;
@@ -366,9 +426,26 @@ void detail_rounds(FitState& s) {
                       Dd.report().t_solve);
       if (move < u.detail_tolerance) { ++k; break; }
     }
-    rep.detail_iterations_run += k;
+    if (local) ++rep.pull_rounds_run;
+    else rep.detail_iterations_run += k;
   }
-  rep.t_detail = seconds_since(t0);
+  (local ? rep.t_pull : rep.t_detail) = seconds_since(t0);
+}
+
+void detail_rounds(FitState& s) {
+  const FitParameters& u = s.u;
+  if (u.detail_rounds > 0 && (u.laplacian_updating || u.remeshing))
+    s.rep.message += "detail rounds skipped: Laplacian updating already regularizes with the current shape. ";
+  if (!(u.detail_rounds > 0 && u.max_iterations > 0 && !u.laplacian_updating && !u.remeshing)) return;
+  run_rounds(s, u.detail_rounds, false);
+}
+
+void pull_rounds(FitState& s) {
+  const FitParameters& u = s.u;
+  if (u.pull_rounds <= 0 || u.detail_rounds > 0 || u.max_iterations <= 0 || u.laplacian_updating || u.remeshing ||
+      !u.detail_residual_matching)
+    return;
+  run_rounds(s, u.pull_rounds, true);
 }
 
 }  // namespace fit_impl

@@ -202,6 +202,9 @@ void propagate_displacements(FitState& s);
 
 // ---- fit_detail.cpp
 void detail_rounds(FitState& s);
+// Pull rounds (FitParameters::pull_rounds): detail rounds that move only the vertices near the
+// regions the fit leaves unexplained, run when no detail rounds are asked for.
+void pull_rounds(FitState& s);
 
 // ---- fit_repair.cpp
 /// Faces whose normal is more than 120° against the normal NR of the cloud point nearest to

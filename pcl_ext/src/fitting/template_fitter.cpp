@@ -185,7 +185,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     // rounds the regions are looked at before them (the rounds draw a stuck part closer without
     // bringing it back), and only the kept fit runs them.
     const bool may_retry = params_in.coarse_nodes == -1 && params.coarse_nodes == 0 && !params.remeshing;
-    const bool before_detail = may_retry && params.detail_rounds > 0;
+    const bool before_detail = may_retry && (params.detail_rounds > 0 || params.pull_rounds > 0);
     const auto t_all = Clock::now();
     // one bar over both fits: never backwards (the first fit may finish after the second ran)
     double last = 0;
@@ -395,6 +395,7 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
                          bool orient_normals, int coarse_prepass, SharedWork& shared) {
   const auto t_all = Clock::now();
   FitParameters first = params;
+  first.pull_rounds = 0;    // the second pass pulls
   first.detail_rounds = 0;  // (2 rounds here: clean Hausdorff 0.50-0.91 % for 0.61-0.93 % over the
                             // roughly placed bunny seeds 1-5, the same scale bias, twice the time)
   TriMesh r1;
@@ -477,6 +478,7 @@ std::vector<FitReport::UnexplainedRegion> FitRun::regions_now() const { return f
 FitReport FitRun::finish(TriMesh& result, std::vector<VertexStatus>& status) {
   fit_impl::FitState& s = *s_;
   fit_impl::detail_rounds(s);
+  fit_impl::pull_rounds(s);
   const int known_crossings = fit_impl::repair_surface(s);
   fit_impl::compute_metrics(s, known_crossings);
   result.V = s.V;

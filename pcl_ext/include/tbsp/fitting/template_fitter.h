@@ -209,6 +209,16 @@ struct FitParameters {
   /// pull, but a region of clutter facing the surface would pull it: exclude clutter with an
   /// ROI. Default true.
   bool detail_pull_unexplained = true;
+  /// Pull rounds: when a fit without detail rounds leaves regions of the cloud unexplained
+  /// (FitReport::unexplained: a thin part folded back, a finger left behind), up to this many
+  /// detail rounds that move only the vertices within reach of those regions (1.5 × a region's
+  /// farthest distance + the residual kernel's radius), every other vertex held where the fit
+  /// put it; they stop when no region is left. The regions' points pull as with
+  /// detail_pull_unexplained (and so would a region of clutter facing the surface: exclude it
+  /// with an ROI). Each round costs one factorization and detail_iterations back-substitutions.
+  /// Default 2; 0 (off)..100; ignored with detail rounds (they pull the same regions),
+  /// laplacian_updating, remeshing or detail_residual_matching = false.
+  int pull_rounds = 2;
   /// Kernel radius of residual matching, × r_max. Default 2. [0.5, 10].
   double detail_radius_factor = 2;
   /// Residual matching: a point counts only if its normal is within this angle (degrees) of the
@@ -337,11 +347,12 @@ struct FitReport {
   // timings (s); t_normals and t_search: the cloud's preparation, done once per fit_template
   // call (a fit without markers shares it between its passes and hypotheses)
   double t_normals = 0, t_search = 0, t_alignment = 0, t_initial = 0, t_coarse = 0, t_scale = 0, t_iterations = 0, t_matching = 0,
-         t_solve = 0, t_propagation = 0, t_detail = 0, t_remeshing = 0, t_fairing = 0, t_metrics = 0, t_total = 0;
+         t_solve = 0, t_propagation = 0, t_detail = 0, t_pull = 0, t_remeshing = 0, t_fairing = 0, t_metrics = 0, t_total = 0;
   int detail_iterations_run = 0;         ///< matching / solve steps of the detail rounds, all rounds
   Eigen::Index detail_surface_constraints = 0;  ///< data -> surface constraints, all detail rounds
   Eigen::Index detail_points_tracked = 0;  ///< cloud points of the residual matching, last detail round
-  int detail_rounds_pulling = 0;  ///< detail rounds whose unexplained regions pulled (FitParameters::detail_pull_unexplained)
+  int detail_rounds_pulling = 0;
+  int pull_rounds_run = 0;  ///< pull rounds run (FitParameters::pull_rounds; 0 when no region was left)  ///< detail rounds whose unexplained regions pulled (FitParameters::detail_pull_unexplained)
 };
 
 /// \brief Fits `templ` to the cloud P (#P by 3) with normals N (#P by 3, or 0 rows: then they
