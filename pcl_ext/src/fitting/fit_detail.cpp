@@ -95,8 +95,8 @@ std::vector<char> near_regions(const Eigen::MatrixX3d& V, const Eigen::MatrixX3d
 // detail_surface_weight, faces to the cloud points that project onto them; it factorizes once
 // and iterates matching + back-substitution.
 // `local` (pull rounds, FitParameters::pull_rounds): only the vertices near the regions the fit
-// leaves unexplained move, every other one is held where the fit put it; the rounds stop when
-// no region is left.
+// leaves unexplained move, every other one is held where the fit put it; nothing runs when the
+// first round finds no region.
 static void run_rounds(FitState& s, int rounds, bool local) {
   FitParameters& u = s.u;
   FitReport& rep = s.rep;
@@ -176,8 +176,8 @@ static void run_rounds(FitState& s, int rounds, bool local) {
           for (Eigen::Index i = 0; i < np; ++i)
             if (in_region[std::size_t(i)]) pulled_cap[std::size_t(i)] = std::max(pulled_cap[std::size_t(i)], cap[std::size_t(i)]);
           if (!regions.empty()) {
-            const std::vector<char> near = near_regions(V, Q, member, regions, rd);
-            for (std::size_t j = 0; j < near.size(); ++j) pulled_near[j] = pulled_near[j] || near[j];
+            const std::vector<char> within = near_regions(V, Q, member, regions, rd);
+            for (std::size_t j = 0; j < within.size(); ++j) pulled_near[j] = pulled_near[j] || within[j];
           }
           for (Eigen::Index i = 0; i < np; ++i)
             if (pulled_cap[std::size_t(i)] > 0) {

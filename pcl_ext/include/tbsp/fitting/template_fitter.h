@@ -213,9 +213,10 @@ struct FitParameters {
   /// (FitReport::unexplained: a thin part folded back, a finger left behind), up to this many
   /// detail rounds that move only the vertices within reach of those regions (1.5 × a region's
   /// farthest distance + the residual kernel's radius), every other vertex held where the fit
-  /// put it; they stop when no region is left. The regions' points pull as with
-  /// detail_pull_unexplained (and so would a region of clutter facing the surface: exclude it
-  /// with an ROI). Each round costs one factorization and detail_iterations back-substitutions.
+  /// put it. A region's points keep pulling in the later rounds (also once they fall under the
+  /// region threshold); a fit that leaves no region runs none and is unchanged. The regions'
+  /// points pull as with detail_pull_unexplained (and so would a region of clutter facing the
+  /// surface: exclude it with an ROI). Each round costs one factorization and detail_iterations back-substitutions.
   /// Default 2; 0 (off)..100; ignored with detail rounds (they pull the same regions),
   /// laplacian_updating, remeshing or detail_residual_matching = false.
   int pull_rounds = 2;

@@ -7,8 +7,8 @@
 /// (the fitter's detail rounds: ~90k points indexed and ~43k queries per iteration). Against
 /// PointSearch (nanoflann's k-d tree) it builds in O(n log n) with a small constant (one sort of
 /// 64-bit cell keys, no tree) and answers a query by scanning the 27 cells around it, contiguous
-/// in memory. Written by hand: nanoflann, FLANN and PCL have k-d trees and octrees for any
-/// radius, none a fixed-radius grid with a deterministic visiting order.
+/// in memory. Written by hand: the k-d trees and octrees of nanoflann, FLANN and PCL answer any
+/// radius; none offers a fixed-radius grid rebuilt by one sort, with a fixed visiting order.
 
 #include <Eigen/Core>
 #include <cmath>
@@ -24,7 +24,7 @@ public:
   /// Non-finite rows are left out. O(n log n) time, O(n) memory. The cells are `radius` wide, or
   /// wider where that would make more than 2^20 cells along an axis (a radius below a millionth
   /// of the points' extent: still correct, the queries scan more points).
-  /// \throws InvalidInput for radius ≤ 0 or non-finite.
+  /// \throws InvalidInput for radius ≤ 0 or non-finite, or 2^32 − 1 points or more.
   RadiusGrid(const Eigen::MatrixX3d& P, double radius);
 
   /// The radius the grid was built for.
