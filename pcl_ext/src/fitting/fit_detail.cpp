@@ -114,21 +114,21 @@ static void run_rounds(FitState& s, int rounds, bool local) {
   const double r = u.max_match_distance;
   const double rd = u.detail_radius_factor * r;  // kernel radius of the residual matching
   const double cos_detail = std::cos(u.detail_normal_angle_deg * M_PI / 180.0);
-  const std::vector<std::vector<int>> near = face_neighbourhoods(V.rows(), F);
+  std::vector<std::vector<int>> near;  // face_neighbourhoods, built when a round first needs them
   LaplacianDeformer Dd;  // one for all rounds: the solver keeps its symbolic analysis
   Dd.setUseRotationField(false);
+  // the ROI points (rows of Q) and their cloud indices: the same every round
+  std::vector<Eigen::Index> qi;
+  for (Eigen::Index i = 0; i < np; ++i)
+    if (roi_ok[std::size_t(i)]) qi.push_back(i);
+  const Eigen::MatrixX3d Q = roi_points(s.cloud);
+  const std::size_t nq = qi.size();
   // local: the points of any round's regions keep pulling (by their first region's reach) and
   // the vertices near them keep moving, so a part is drawn in all the way and not only until
   // its points fall below the region threshold
-  std::vector<double> pulled_cap;
-  std::vector<char> pulled_near;
+  std::vector<double> pulled_cap(local ? nq : 0, 0.0);  // per ROI point
+  std::vector<char> pulled_near(local ? std::size_t(V.rows()) : 0, 0);
   for (int round = 0; round < rounds; ++round) {
-    TriMesh cur;
-    cur.V = V;
-    cur.F = F;
-    Dd.clearConstraints();
-    Dd.setMesh(cur);
-    s.addMarkers(Dd, u.detail_marker_weight);
     const auto t_round = Clock::now();
     // residual matching: every ROI point's closest point on the fit, as a face and barycentric
     // weights, found at the start of the round and then updated among the faces around the
@@ -142,70 +142,54 @@ static void run_rounds(FitState& s, int rounds, bool local) {
     bool nothing_to_pull = false;
     if (u.detail_residual_matching) {
       // every ROI point's distance and closest face (Embree; the lowest of equally close faces)
-      Eigen::MatrixX3d Proi = Eigen::MatrixX3d::Constant(np, 3, std::numeric_limits<double>::quiet_NaN());
-      for (Eigen::Index i = 0; i < np; ++i)
-        if (roi_ok[std::size_t(i)]) Proi.row(i) = P.row(i);
-      Eigen::VectorXi face;
-      Eigen::VectorXd dist = point_mesh_distances(V, F, Proi, &face);
-      for (Eigen::Index i = 0; i < np; ++i)
-        if (!roi_ok[std::size_t(i)]) dist(i) = 0;
+      Eigen::VectorXi fq;
+      const Eigen::VectorXd dq = point_mesh_distances(V, F, Q, &fq);
       // points of the regions the fit leaves unexplained (a part the fit has not reached: the
       // tip of a thin ear folded back) are tracked at any distance and pull by their whole
       // residual; scattered far points (outliers) form no region and stay ignored
-      std::vector<double> cap(std::size_t(np), r);
-      std::vector<char> in_region(std::size_t(np), 0);
+      std::vector<double> cap(nq, r);  // per ROI point
+      std::vector<char> in_region(nq, 0);
       if (u.detail_pull_unexplained || local) {
-        std::vector<Eigen::Index> qi;  // cloud index of each ROI point (the rows of roi_points)
-        for (Eigen::Index i = 0; i < np; ++i)
-          if (roi_ok[std::size_t(i)]) qi.push_back(i);
-        const Eigen::MatrixX3d Q = roi_points(s.cloud);
-        Eigen::VectorXd dq(Q.rows());
-        for (std::size_t k = 0; k < qi.size(); ++k) dq(Eigen::Index(k)) = dist(qi[k]);
         std::vector<int> member;
         const auto regions = unexplained_regions(Q, dq, s.cloud.diag, r, &member);
-        for (std::size_t k = 0; k < qi.size(); ++k)
+        for (std::size_t k = 0; k < nq; ++k)
           if (member[k] >= 0) {
-            cap[std::size_t(qi[k])] = 1.5 * regions[std::size_t(member[k])].max_distance;
-            in_region[std::size_t(qi[k])] = 1;
+            cap[k] = 1.5 * regions[std::size_t(member[k])].max_distance;
+            in_region[k] = 1;
           }
         if (local) {
-          if (pulled_cap.empty()) {
-            pulled_cap.assign(std::size_t(np), 0.0);
-            pulled_near.assign(std::size_t(V.rows()), 0);
-          }
-          for (Eigen::Index i = 0; i < np; ++i)
-            if (in_region[std::size_t(i)]) pulled_cap[std::size_t(i)] = std::max(pulled_cap[std::size_t(i)], cap[std::size_t(i)]);
           if (!regions.empty()) {
             const std::vector<char> within = near_regions(V, Q, member, regions, rd);
             for (std::size_t j = 0; j < within.size(); ++j) pulled_near[j] = pulled_near[j] || within[j];
           }
-          for (Eigen::Index i = 0; i < np; ++i)
-            if (pulled_cap[std::size_t(i)] > 0) {
-              cap[std::size_t(i)] = std::max(cap[std::size_t(i)], pulled_cap[std::size_t(i)]);
-              in_region[std::size_t(i)] = 1;
+          for (std::size_t k = 0; k < nq; ++k) {
+            if (in_region[k]) pulled_cap[k] = std::max(pulled_cap[k], cap[k]);
+            if (pulled_cap[k] > 0) {
+              cap[k] = std::max(cap[k], pulled_cap[k]);
+              in_region[k] = 1;
             }
+          }
           movable = pulled_near;
           nothing_to_pull = std::find(movable.begin(), movable.end(), char(1)) == movable.end();
-        }
-        if (!regions.empty() && !local) {
+        } else if (!regions.empty()) {
           ++rep.detail_rounds_pulling;
           logger()->debug("[TemplateFitting] detail round {}: {} unexplained region(s), {} points pull at any distance", round + 1,
                           regions.size(), unexplained_points(regions));
         }
       }
+      if (nothing_to_pull) break;
       // local: only the points that can reach a vertex that moves
-      auto reaches = [&](Eigen::Index i) {
-        if (!local || in_region[std::size_t(i)]) return true;
-        const int f = face(i);
+      auto reaches = [&](std::size_t k) {
+        if (!local || in_region[k]) return true;
+        const int f = fq(Eigen::Index(k));
         return bool(movable[std::size_t(F(f, 0))] || movable[std::size_t(F(f, 1))] || movable[std::size_t(F(f, 2))]);
       };
-      for (Eigen::Index i = 0; i < np; ++i)
-        if (face(i) >= 0 && dist(i) <= std::max(3 * r, cap[std::size_t(i)]) && reaches(i)) {
-          rk.push_back(i);
-          rf.push_back(face(i));
-          rcap.push_back(cap[std::size_t(i)]);
+      for (std::size_t k = 0; k < nq; ++k)
+        if (fq(Eigen::Index(k)) >= 0 && dq(Eigen::Index(k)) <= std::max(3 * r, cap[k]) && reaches(k)) {
+          rk.push_back(qi[k]);
+          rf.push_back(fq(Eigen::Index(k)));
+          rcap.push_back(cap[k]);
         }
-      if (nothing_to_pull) break;
       rb.resize(Eigen::Index(rk.size()), 3);
       for (std::size_t t = 0; t < rk.size(); ++t) {
         const int f = rf[t];
@@ -213,6 +197,13 @@ static void run_rounds(FitState& s, int rounds, bool local) {
                                                       V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose()).transpose();
       }
     }
+    TriMesh cur;
+    cur.V = V;
+    cur.F = F;
+    Dd.clearConstraints();
+    Dd.setMesh(cur);
+    s.addMarkers(Dd, u.detail_marker_weight);
+    if (near.empty()) near = face_neighbourhoods(V.rows(), F);
     // the tracked points in the order of their faces at the round's start: the loops over them
     // read the mesh in order instead of at random (each point's result is its own)
     std::vector<Eigen::Index> by_face(rk.size());

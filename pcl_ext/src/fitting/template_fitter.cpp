@@ -182,8 +182,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     std::vector<VertexStatus> st;
     // automatic coarse stage with markers: off, and run in a second fit when the first leaves
     // regions of the scan unexplained (a part the markers did not turn far enough). With detail
-    // rounds the regions are looked at before them (the rounds draw a stuck part closer without
-    // bringing it back), and only the kept fit runs them.
+    // or pull rounds the regions are looked at before them (the rounds draw a stuck part closer
+    // without bringing it back), and only the kept fit runs them.
     const bool may_retry = params_in.coarse_nodes == -1 && params.coarse_nodes == 0 && !params.remeshing;
     const bool before_detail = may_retry && (params.detail_rounds > 0 || params.pull_rounds > 0);
     const auto t_all = Clock::now();
