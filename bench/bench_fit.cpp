@@ -350,11 +350,13 @@ int main(int argc, char** argv) {
       row("  same + 4 detail rounds", s.markers.size(), t.V.rows(), s.P.rows(), dr, note);
     }
     if (c.points >= 100000)
-      std::printf("|   stages (median of %d): initial %.2f, scale %.2f, iterations %.2f (matching %.2f, solves %.2f), "
-                  "propagation %.2f, metrics %.2f; all automatic stages without the metrics %.2f | | | | | | | | |\n",
-                  repeat, median_of(all, &FitReport::t_initial), median_of(all, &FitReport::t_scale),
+      std::printf("|   stages (median of %d): search + normals %.2f, initial %.2f, scale %.2f, coarse %.2f, iterations %.2f "
+                  "(matching %.2f, solves %.2f), propagation %.2f, pull %.2f, metrics %.2f; all automatic stages without the "
+                  "metrics %.2f | | | | | | | | |\n",
+                  repeat, median_of(all, &FitReport::t_search) + median_of(all, &FitReport::t_normals),
+                  median_of(all, &FitReport::t_initial), median_of(all, &FitReport::t_scale), median_of(all, &FitReport::t_coarse),
                   median_of(all, &FitReport::t_iterations), median_of(all, &FitReport::t_matching),
-                  median_of(all, &FitReport::t_solve), median_of(all, &FitReport::t_propagation),
+                  median_of(all, &FitReport::t_solve), median_of(all, &FitReport::t_propagation), median_of(all, &FitReport::t_pull),
                   median_of(all, &FitReport::t_metrics), r.t_total - r.t_metrics);
     if (!poisson || c.points < 100000) continue;
     // PCL Poisson on the same cloud (with its normals), same run

@@ -191,3 +191,87 @@ TEST(PointMeshDistances, DegenerateFacesNonFiniteQueriesAndBadInput) {
   }
   EXPECT_THROW(point_mesh_distances(V, Eigen::MatrixX3i(0, 3), Q), InvalidInput);
 }
+
+TEST(UpdatePointMeshDistances, EqualAFullQueryAfterLocalMoves) {
+  // an icosphere whose vertices near a spot are pushed out and pulled in several times (closest
+  // faces change, some points' faces move away from them), queries near and far: after each
+  // update the distances and faces are the full query's to the bit
+  TriMesh s = make_icosphere(4, 1.0);  // 5,120 faces
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> u(-1.6, 1.6);
+  Eigen::MatrixX3d Q(4001, 3);
+  for (Eigen::Index i = 0; i < 4000; ++i) Q.row(i) << u(rng), u(rng), u(rng);
+  Q.row(4000) << std::numeric_limits<double>::quiet_NaN(), 0, 0;
+  Eigen::VectorXi faces;
+  Eigen::VectorXd d = point_mesh_distances(s.V, s.F, Q, &faces);
+  std::normal_distribution<double> n(0, 1);
+  for (int step = 0; step < 6; ++step) {
+    Eigen::Vector3d spot(n(rng), n(rng), n(rng));
+    spot.normalize();
+    const double amount = step % 2 ? -0.3 : 0.25;  // out, in, out...: points change sides
+    std::vector<char> moved(std::size_t(s.V.rows()), 0);
+    for (Eigen::Index v = 0; v < s.V.rows(); ++v) {
+      const double w = 1 - (s.V.row(v).transpose() - spot).norm() / 0.5;
+      if (w <= 0) continue;
+      s.V.row(v) *= 1 + amount * w;
+      moved[std::size_t(v)] = 1;
+    }
+    update_point_mesh_distances(s.V, s.F, Q, moved, d, faces);
+    Eigen::VectorXi full_faces;
+    const Eigen::VectorXd full = point_mesh_distances(s.V, s.F, Q, &full_faces);
+    for (Eigen::Index i = 0; i < 4000; ++i) {
+      ASSERT_EQ(d(i), full(i)) << "step " << step << " point " << i;
+      ASSERT_EQ(faces(i), full_faces(i)) << "step " << step << " point " << i;
+    }
+    EXPECT_TRUE(std::isnan(d(4000)));
+    EXPECT_EQ(faces(4000), -1);
+  }
+  // nothing moved: nothing changes
+  const Eigen::VectorXd before = d;
+  update_point_mesh_distances(s.V, s.F, Q, std::vector<char>(std::size_t(s.V.rows()), 0), d, faces);
+  for (Eigen::Index i = 0; i < 4000; ++i) ASSERT_EQ(d(i), before(i));
+}
+
+TEST(UpdatePointMeshDistances, EquallyCloseFacesStillGiveTheLowestIndex) {
+  // the fan of EquallyCloseFacesGiveTheLowestIndex: lifting the rim of faces 3..5 and putting
+  // it back leaves the query above the centre equally close to all six faces again: face 0,
+  // whether its old face moved or not
+  Eigen::MatrixX3d V(7, 3);
+  V.row(0) << 0, 0, 0;
+  for (int k = 0; k < 6; ++k) V.row(k + 1) << std::cos(k * M_PI / 3), std::sin(k * M_PI / 3), 0;
+  Eigen::MatrixX3i F(6, 3);
+  for (int k = 0; k < 6; ++k) F.row(5 - k) << 0, k + 1, (k + 1) % 6 + 1;
+  Eigen::MatrixX3d Q(1, 3);
+  Q << 0, 0, 0.5;
+  Eigen::VectorXi faces;
+  Eigen::VectorXd d = point_mesh_distances(V, F, Q, &faces);
+  ASSERT_EQ(faces(0), 0);
+  std::vector<char> moved(7, 0);
+  moved[0] = 1;  // the centre: every face moves
+  V(0, 2) = 0.1;
+  update_point_mesh_distances(V, F, Q, moved, d, faces);
+  EXPECT_EQ(d(0), 0.4);
+  V(0, 2) = 0;
+  update_point_mesh_distances(V, F, Q, moved, d, faces);  // farther again: measured anew
+  EXPECT_EQ(d(0), 0.5);
+  EXPECT_EQ(faces(0), 0);
+}
+
+TEST(UpdatePointMeshDistances, BadInputIsNamed) {
+  TriMesh s = make_icosphere(1, 1.0);
+  Eigen::MatrixX3d Q(2, 3);
+  Q << 0, 0, 2, 0, 2, 0;
+  Eigen::VectorXi faces;
+  Eigen::VectorXd d = point_mesh_distances(s.V, s.F, Q, &faces);
+  std::vector<char> moved(std::size_t(s.V.rows()), 1);
+  EXPECT_THROW(update_point_mesh_distances(s.V, s.F, Q, std::vector<char>(3, 1), d, faces), InvalidInput);
+  Eigen::VectorXd d1 = d.head(1);
+  EXPECT_THROW(update_point_mesh_distances(s.V, s.F, Q, moved, d1, faces), InvalidInput);
+  faces(1) = -1;
+  try {
+    update_point_mesh_distances(s.V, s.F, Q, moved, d, faces);
+    ADD_FAILURE() << "no error for a point without a face";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("point 1 has no closest face"), std::string::npos) << e.what();
+  }
+}

@@ -142,8 +142,9 @@ static void run_rounds(FitState& s, int rounds, bool local) {
     bool nothing_to_pull = false;
     if (u.detail_residual_matching) {
       // every ROI point's distance and closest face (Embree; the lowest of equally close faces)
-      Eigen::VectorXi fq;
-      const Eigen::VectorXd dq = point_mesh_distances(V, F, Q, &fq);
+      const RoiDistances& measured = roi_distances(s);
+      const Eigen::VectorXi& fq = measured.f;
+      const Eigen::VectorXd& dq = measured.d;
       // points of the regions the fit leaves unexplained (a part the fit has not reached: the
       // tip of a thin ear folded back) are tracked at any distance and pull by their whole
       // residual; scattered far points (outliers) form no region and stay ignored

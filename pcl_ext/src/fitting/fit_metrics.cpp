@@ -83,10 +83,36 @@ Eigen::MatrixX3d roi_points(const PreparedCloud& c) {
   return Q;
 }
 
-std::vector<FitReport::UnexplainedRegion> unexplained_regions(const FitState& s) {
-  const Eigen::MatrixX3d Q = roi_points(s.cloud);
-  if (Q.rows() == 0) return {};
-  return unexplained_regions(Q, point_mesh_distances(s.V, s.F, Q), s.cloud.diag, s.u.max_match_distance);
+const RoiDistances& roi_distances(FitState& s) {
+  RoiDistances& r = s.roi_dist;
+  if (r.V.rows() == 0) r.Q = roi_points(s.cloud);
+  if (r.Q.rows() == 0) return r;
+  const bool same_mesh = r.V.rows() == s.V.rows() && r.F.rows() == s.F.rows() && r.F == s.F;
+  std::vector<char> moved;
+  Eigen::Index n_moved = 0;
+  if (same_mesh) {
+    moved.assign(std::size_t(s.V.rows()), 0);
+    for (Eigen::Index v = 0; v < s.V.rows(); ++v)
+      if (s.V.row(v) != r.V.row(v)) {
+        moved[std::size_t(v)] = 1;
+        ++n_moved;
+      }
+    if (n_moved == 0) return r;
+  }
+  if (same_mesh && 4 * n_moved <= s.V.rows()) {
+    update_point_mesh_distances(s.V, s.F, r.Q, moved, r.d, r.f);
+  } else {
+    r.d = point_mesh_distances(s.V, s.F, r.Q, &r.f);
+    r.F = s.F;
+  }
+  r.V = s.V;
+  return r;
+}
+
+std::vector<FitReport::UnexplainedRegion> unexplained_regions(FitState& s) {
+  const RoiDistances& r = roi_distances(s);
+  if (r.Q.rows() == 0) return {};
+  return unexplained_regions(r.Q, r.d, s.cloud.diag, s.u.max_match_distance);
 }
 
 void compute_metrics(FitState& s, int known_crossings) {
@@ -98,9 +124,10 @@ void compute_metrics(FitState& s, int known_crossings) {
   report_progress(s.progress, 0.95, "metrics");
   const auto t0 = Clock::now();
   {
-    const Eigen::MatrixX3d Q = roi_points(s.cloud);
+    const RoiDistances& measured = roi_distances(s);
+    const Eigen::MatrixX3d& Q = measured.Q;
     const Eigen::Index nq = Q.rows();
-    const Eigen::VectorXd dist = point_mesh_distances(V, F, Q);
+    const Eigen::VectorXd& dist = measured.d;
     rep.hausdorff = dist.maxCoeff();
     rep.hausdorff_rel = rep.hausdorff / diag;
     rep.mean = dist.mean();

@@ -52,6 +52,16 @@ struct PreparedCloud {
   double t_search = 0, t_normals = 0;  ///< seconds the preparation took
 };
 
+/// Distances and closest faces of the ROI points to the shape V, F they were measured on
+/// (roi_distances keeps them current).
+struct RoiDistances {
+  Eigen::MatrixX3d Q;  ///< the ROI points, in order (roi_points)
+  Eigen::MatrixX3d V;  ///< the shape measured (no rows: none yet)
+  Eigen::MatrixX3i F;
+  Eigen::VectorXd d;   ///< per row of Q
+  Eigen::VectorXi f;   ///< per row of Q: its closest face (the lowest index of equally close ones)
+};
+
 struct FitState {
   FitState(const TriMesh& t, const std::vector<FitMarker>& m, const ProgressCallback& p, FitReport& r,
            std::vector<VertexStatus>& st, const PreparedCloud& c)
@@ -86,6 +96,7 @@ struct FitState {
   std::vector<int> prop_ids;         ///< per vertex: id of its propagated constraint (-1: none)
   bool propagation_handled = false;  ///< propagation decided in the loop (done or skipped for good)
   TriMesh coarse;                    ///< the coarse stage's result: the rest shape of the later stages
+  RoiDistances roi_dist;             ///< the last ROI point distances measured (roi_distances)
   /// nodes of a coarser graph the coarse stage fits first (the later hypotheses of a fit
   /// without markers, FitParameters::coarse_prepass_nodes); 0: the coarse_nodes graph alone
   int coarse_prepass = 0;
@@ -220,8 +231,12 @@ int repair_surface(FitState& s);
 void compute_metrics(FitState& s, int known_crossings);
 /// The cloud's ROI points, in order.
 Eigen::MatrixX3d roi_points(const PreparedCloud& c);
-/// FitReport::unexplained of the current shape s.V (one point-to-mesh pass over the ROI points).
-std::vector<FitReport::UnexplainedRegion> unexplained_regions(const FitState& s);
+/// Distances and closest faces of the ROI points to the current shape s.V, s.F: exactly what
+/// point_mesh_distances gives, measured again only where the shape moved since the last call
+/// (update_point_mesh_distances; all of it when F changed or over a quarter of the vertices moved).
+const RoiDistances& roi_distances(FitState& s);
+/// FitReport::unexplained of the current shape s.V (roi_distances).
+std::vector<FitReport::UnexplainedRegion> unexplained_regions(FitState& s);
 /// Points in the regions (sum of their counts).
 Eigen::Index unexplained_points(const std::vector<FitReport::UnexplainedRegion>& regions);
 /// FitReport::unexplained of the ROI points Q and their distances to the result. `member`

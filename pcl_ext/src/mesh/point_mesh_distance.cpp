@@ -137,6 +137,8 @@ float round_up(double x) {
 struct Triangles {
   const Eigen::MatrixX3d& V;
   const Eigen::MatrixX3i& F;
+  const std::vector<int>* rows = nullptr;  // the tree's faces as rows of F (nullptr: all, in order)
+  int row(unsigned prim) const { return rows ? (*rows)[prim] : int(prim); }
 };
 
 struct Query {
@@ -149,7 +151,7 @@ struct Query {
 
 void face_bounds(const RTCBoundsFunctionArguments* args) {
   const auto* m = static_cast<const Triangles*>(args->geometryUserPtr);
-  const Eigen::Index f = Eigen::Index(args->primID);
+  const Eigen::Index f = m->row(args->primID);
   Eigen::Vector3d lo = m->V.row(m->F(f, 0)).transpose(), hi = lo;
   for (int k = 1; k < 3; ++k) {
     lo = lo.cwiseMin(m->V.row(m->F(f, k)).transpose());
@@ -168,7 +170,7 @@ void face_bounds(const RTCBoundsFunctionArguments* args) {
 bool face_query(RTCPointQueryFunctionArguments* args) {
   auto* r = static_cast<Query*>(args->userPtr);
   const Triangles& m = *r->mesh;
-  const Eigen::Index f = Eigen::Index(args->primID);
+  const Eigen::Index f = m.row(args->primID);
   const Eigen::Vector3d a = m.V.row(m.F(f, 0)).transpose(), b = m.V.row(m.F(f, 1)).transpose(),
                         c = m.V.row(m.F(f, 2)).transpose();
   const Eigen::Vector3d w = closest_point_barycentric(r->q, a, b, c);
@@ -180,27 +182,13 @@ bool face_query(RTCPointQueryFunctionArguments* args) {
   return true;
 }
 
-}  // namespace
 
-Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P,
-                                     Eigen::VectorXi* faces) {
-  const std::string who = "[tbsp::point_mesh_distances] ";
-  if (F.rows() == 0) throw InvalidInput(who + "the mesh has no faces");
-  for (Eigen::Index f = 0; f < F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) {
-      const int v = F(f, k);
-      if (v < 0 || v >= V.rows())
-        throw InvalidInput(who + "face " + std::to_string(f) + " refers to vertex " + std::to_string(v) + " but the mesh has " +
-                           std::to_string(V.rows()) + " vertices");
-      if (!V.row(v).allFinite())
-        throw InvalidInput(who + "vertex " + std::to_string(v) + " (of face " + std::to_string(f) + ") is not finite");
-    }
-  const Triangles mesh{V, F};
-  const double scale = V.cwiseAbs().maxCoeff();
+// Embree's tree over the faces of `mesh`; released with rtcReleaseScene.
+RTCScene embree_face_tree(const Triangles& mesh, Eigen::Index count, const std::string& who) {
   RTCDevice device = detail::embree_device();
   RTCScene scene = rtcNewScene(device);
   RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
-  rtcSetGeometryUserPrimitiveCount(g, unsigned(F.rows()));
+  rtcSetGeometryUserPrimitiveCount(g, unsigned(count));
   rtcSetGeometryUserData(g, const_cast<Triangles*>(&mesh));
   rtcSetGeometryBoundsFunction(g, face_bounds, nullptr);
   rtcCommitGeometry(g);
@@ -211,9 +199,52 @@ Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::Mat
   const RTCError e = rtcGetDeviceError(device);
   if (e != RTC_ERROR_NONE) {
     rtcReleaseScene(scene);
-    throw NumericalFailure(who + "Embree could not build the tree of " + std::to_string(F.rows()) + " faces (error " +
+    throw NumericalFailure(who + "Embree could not build the tree of " + std::to_string(count) + " faces (error " +
                            std::to_string(int(e)) + (e == RTC_ERROR_OUT_OF_MEMORY ? ": out of memory)" : ")"));
   }
+  return scene;
+}
+
+// The closest of the tree's faces to q that is closer than r's current (d, face) — or as close
+// with a lower index; r keeps its (d, face) when there is none.
+void closer_face(RTCScene scene, Query& r) {
+  RTCPointQuery pq;
+  pq.x = float(r.q.x());
+  pq.y = float(r.q.y());
+  pq.z = float(r.q.z());
+  pq.time = 0.f;
+  pq.radius = std::isfinite(r.d) ? round_up(r.d + r.margin) : std::numeric_limits<float>::infinity();
+  RTCPointQueryContext context;
+  rtcInitPointQueryContext(&context);
+  rtcPointQuery(scene, &pq, &context, face_query, &r);
+}
+
+void check_distance_mesh(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::string& who) {
+  if (F.rows() == 0) throw InvalidInput(who + "the mesh has no faces");
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int v = F(f, k);
+      if (v < 0 || v >= V.rows())
+        throw InvalidInput(who + "face " + std::to_string(f) + " refers to vertex " + std::to_string(v) + " but the mesh has " +
+                           std::to_string(V.rows()) + " vertices");
+      if (!V.row(v).allFinite())
+        throw InvalidInput(who + "vertex " + std::to_string(v) + " (of face " + std::to_string(f) + ") is not finite");
+    }
+}
+
+// a float step of the coordinates is ~6e-8 of their size: 1e-6 of it keeps the culling
+// conservative (no face that could be closest is skipped)
+double culling_margin(double scale, const Eigen::Vector3d& q) { return 1e-6 * std::max(scale, q.cwiseAbs().maxCoeff()); }
+
+}  // namespace
+
+Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P,
+                                     Eigen::VectorXi* faces) {
+  const std::string who = "[tbsp::point_mesh_distances] ";
+  check_distance_mesh(V, F, who);
+  const Triangles mesh{V, F};
+  const double scale = V.cwiseAbs().maxCoeff();
+  RTCScene scene = embree_face_tree(mesh, F.rows(), who);
   Eigen::VectorXd d(P.rows());
   if (faces) faces->setConstant(P.rows(), -1);
 #pragma omp parallel for schedule(dynamic, 256)
@@ -223,23 +254,77 @@ Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::Mat
       d(i) = std::numeric_limits<double>::quiet_NaN();
       continue;
     }
-    // a float step of the coordinates is ~6e-8 of their size: 1e-6 of it keeps the culling
-    // conservative (no face that could be closest is skipped)
-    Query r{&mesh, q, 1e-6 * std::max(scale, q.cwiseAbs().maxCoeff())};
-    RTCPointQuery pq;
-    pq.x = float(q.x());
-    pq.y = float(q.y());
-    pq.z = float(q.z());
-    pq.time = 0.f;
-    pq.radius = std::numeric_limits<float>::infinity();
-    RTCPointQueryContext context;
-    rtcInitPointQueryContext(&context);
-    rtcPointQuery(scene, &pq, &context, face_query, &r);
+    Query r{&mesh, q, culling_margin(scale, q)};
+    closer_face(scene, r);
     d(i) = r.d;
     if (faces) (*faces)(i) = r.face;
   }
   rtcReleaseScene(scene);
   return d;
+}
+
+void update_point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P,
+                                 const std::vector<char>& moved, Eigen::VectorXd& dist, Eigen::VectorXi& faces) {
+  const std::string who = "[tbsp::update_point_mesh_distances] ";
+  check_distance_mesh(V, F, who);
+  if (moved.size() != std::size_t(V.rows()))
+    throw InvalidInput(who + "`moved` has " + std::to_string(moved.size()) + " entries for " + std::to_string(V.rows()) +
+                       " vertices");
+  if (dist.rows() != P.rows() || faces.rows() != P.rows())
+    throw InvalidInput(who + "the distances (" + std::to_string(dist.rows()) + ") and faces (" + std::to_string(faces.rows()) +
+                       ") to update must have one entry per point (" + std::to_string(P.rows()) + ")");
+  // the faces with a moved corner, in increasing order (ties keep going to the lowest index)
+  std::vector<int> rows;
+  std::vector<char> face_moved(std::size_t(F.rows()), 0);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    if (moved[std::size_t(F(f, 0))] || moved[std::size_t(F(f, 1))] || moved[std::size_t(F(f, 2))]) {
+      rows.push_back(int(f));
+      face_moved[std::size_t(f)] = 1;
+    }
+  if (rows.empty()) return;
+  for (Eigen::Index i = 0; i < P.rows(); ++i)
+    if (P.row(i).allFinite() && !(faces(i) >= 0 && faces(i) < F.rows()))
+      throw InvalidInput(who + "point " + std::to_string(i) + " has no closest face (" + std::to_string(faces(i)) +
+                         ") to update from: start from point_mesh_distances of the same points");
+  const Triangles part{V, F, &rows};
+  const double scale = V.cwiseAbs().maxCoeff();
+  RTCScene scene = embree_face_tree(part, Eigen::Index(rows.size()), who);
+  // a point whose closest face kept its corners is at most as far from every other face that did
+  // (d_old): only a moved face can now be closer. Where its closest face moved, the faces that did
+  // not are at least d_old away: a moved face closer than that is the answer, otherwise the point
+  // is measured against the whole mesh again.
+  std::vector<char> again(std::size_t(P.rows()), 0);
+#pragma omp parallel for schedule(dynamic, 1024)
+  for (Eigen::Index i = 0; i < P.rows(); ++i) {
+    const Eigen::Vector3d q = P.row(i).transpose();
+    if (!q.allFinite()) continue;
+    Query r{&part, q, culling_margin(scale, q)};
+    const bool kept = !face_moved[std::size_t(faces(i))];
+    if (kept) {
+      r.d = dist(i);
+      r.face = faces(i);
+    }
+    closer_face(scene, r);
+    if (kept || r.d < dist(i)) {
+      dist(i) = r.d;
+      faces(i) = r.face;
+    } else {
+      again[std::size_t(i)] = 1;
+    }
+  }
+  rtcReleaseScene(scene);
+  std::vector<Eigen::Index> idx;
+  for (Eigen::Index i = 0; i < P.rows(); ++i)
+    if (again[std::size_t(i)]) idx.push_back(i);
+  if (idx.empty()) return;
+  Eigen::MatrixX3d Pa(Eigen::Index(idx.size()), 3);
+  for (std::size_t k = 0; k < idx.size(); ++k) Pa.row(Eigen::Index(k)) = P.row(idx[k]);
+  Eigen::VectorXi fa;
+  const Eigen::VectorXd da = point_mesh_distances(V, F, Pa, &fa);
+  for (std::size_t k = 0; k < idx.size(); ++k) {
+    dist(idx[k]) = da(Eigen::Index(k));
+    faces(idx[k]) = fa(Eigen::Index(k));
+  }
 }
 
 }  // namespace tbsp

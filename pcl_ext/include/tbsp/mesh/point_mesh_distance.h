@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <memory>
+#include <vector>
 
 namespace tbsp {
 
@@ -47,5 +48,20 @@ private:
 /// message names the face / vertex); NumericalFailure if Embree cannot build the tree.
 Eigen::VectorXd point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P,
                                      Eigen::VectorXi* faces = nullptr);
+
+/// \brief point_mesh_distances after some vertices moved: `dist` and `faces` hold the distances
+/// and closest faces of the rows of P to the mesh (V_old, F) (from point_mesh_distances with
+/// faces, or an earlier update); V is the mesh now and moved[v] is nonzero for every vertex v with
+/// V.row(v) != V_old.row(v) (#V entries; F unchanged). On return they are exactly what
+/// point_mesh_distances(V, F, P, &faces) gives — same values, same lowest-index faces — at the
+/// cost of a tree over the faces with a moved corner: a point whose closest face did not move
+/// can only have come closer to one of those, and a point whose face moved is measured against
+/// the whole mesh only when no moved face is now closer than it was (the unmoved faces are at
+/// least that far). A local change (a few thousand of 86k faces) costs a few ms instead of the
+/// whole query. Nothing moved: nothing to do. O(#P log #moved faces) typical.
+/// \throws InvalidInput as point_mesh_distances, for `moved`, `dist` or `faces` of the wrong
+/// size, and for a finite point without a valid face (the message names the point).
+void update_point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& P,
+                                 const std::vector<char>& moved, Eigen::VectorXd& dist, Eigen::VectorXi& faces);
 
 }  // namespace tbsp
