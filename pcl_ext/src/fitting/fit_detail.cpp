@@ -41,12 +41,12 @@ class FaceSpheres {
 public:
   FaceSpheres(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) : s_(F.rows(), 4) {
 #pragma omp parallel for schedule(static)
-    for (Eigen::Index f = 0; f < F.rows(); ++f) {
-      const Eigen::RowVector3d c = (V.row(F(f, 0)) + V.row(F(f, 1)) + V.row(F(f, 2))) / 3.0;
-      double r2 = 0;
-      for (int k = 0; k < 3; ++k) r2 = std::max(r2, (V.row(F(f, k)) - c).squaredNorm());
-      s_.row(f) << c, std::sqrt(r2);
-    }
+    for (Eigen::Index f = 0; f < F.rows(); ++f) set(V, F, f);
+  }
+  // after only the corners of `faces` moved
+  void update(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const std::vector<int>& faces) {
+#pragma omp parallel for schedule(static)
+    for (std::size_t k = 0; k < faces.size(); ++k) set(V, F, faces[k]);
   }
   // true when every point of face f is surely farther than sqrt(d2) from p (a margin of 1e-9 of
   // the distances involved covers the rounding of the bound)
@@ -57,8 +57,22 @@ public:
   }
 
 private:
+  void set(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, Eigen::Index f) {
+    const Eigen::RowVector3d c = (V.row(F(f, 0)) + V.row(F(f, 1)) + V.row(F(f, 2))) / 3.0;
+    double r2 = 0;
+    for (int k = 0; k < 3; ++k) r2 = std::max(r2, (V.row(F(f, k)) - c).squaredNorm());
+    s_.row(f) << c, std::sqrt(r2);
+  }
   Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor> s_;
 };
+
+// Unit normal of face f (zero for a degenerate face), as face_normals computes it.
+Eigen::RowVector3d unit_face_normal(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, Eigen::Index f) {
+  const Eigen::Vector3d a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
+  const Eigen::Vector3d n = (b - a).cross(c - a);
+  const double len = n.norm();
+  return len > 0 ? Eigen::RowVector3d(n.transpose() / len) : Eigen::RowVector3d::Zero();
+}
 
 // The vertices within reach of the unexplained regions (pull rounds): closer than 1.5 × the
 // farthest region's distance + the kernel radius r_d to one of the regions' points.
@@ -81,6 +95,17 @@ std::vector<char> near_regions(const Eigen::MatrixX3d& V, const Eigen::MatrixX3d
     out[std::size_t(j)] = found;
   }
   return out;
+}
+
+// Mean Voronoi area of the vertices of the faces F (the area normalization Ā of
+// LaplacianDeformer's cotangent Laplacian)
+double mean_vertex_area(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
+  const Eigen::VectorXd A = voronoi_areas(V, F);
+  double sum = 0;
+  int cnt = 0;
+  for (Eigen::Index i = 0; i < A.rows(); ++i)
+    if (A(i) > 0) { sum += A(i); ++cnt; }
+  return cnt ? sum / cnt : 1.0;
 }
 
 }  // namespace
@@ -200,10 +225,38 @@ static void run_rounds(FitState& s, int rounds, bool local) {
     }
     TriMesh cur;
     cur.V = V;
-    cur.F = F;
+    // local: the solve is set up on the faces within two rings of the moving vertices only (the
+    // vertices of no face are fixed): the Laplacian rows that hold a moving vertex are those of
+    // the moving vertices and their neighbours, whole there; the non-moving vertices of these
+    // faces are held exactly. The weights are scaled by the ratio of the Laplacians' area
+    // normalizations (L̂ = Ā L over the vertices of the faces set), so the energy is the
+    // whole mesh's with every other vertex held where it is.
+    double wscale = 1.0;
+    std::vector<char> in_solve;    // local: vertex of a face of the solve
+    std::vector<int> solve_face;   // local: row of each face of F in the solve's faces (-1: none)
+    if (local) {
+      std::vector<char> ring = movable;  // and their neighbours
+      for (Eigen::Index f = 0; f < F.rows(); ++f)
+        if (movable[std::size_t(F(f, 0))] || movable[std::size_t(F(f, 1))] || movable[std::size_t(F(f, 2))])
+          for (int c = 0; c < 3; ++c) ring[std::size_t(F(f, c))] = 1;
+      std::vector<Eigen::Index> rows;
+      for (Eigen::Index f = 0; f < F.rows(); ++f)
+        if (ring[std::size_t(F(f, 0))] || ring[std::size_t(F(f, 1))] || ring[std::size_t(F(f, 2))]) rows.push_back(f);
+      cur.F.resize(Eigen::Index(rows.size()), 3);
+      in_solve.assign(std::size_t(V.rows()), 0);
+      solve_face.assign(std::size_t(F.rows()), -1);
+      for (std::size_t k = 0; k < rows.size(); ++k) {
+        cur.F.row(Eigen::Index(k)) = F.row(rows[k]);
+        solve_face[std::size_t(rows[k])] = int(k);
+        for (int c = 0; c < 3; ++c) in_solve[std::size_t(F(rows[k], c))] = 1;
+      }
+      wscale = mean_vertex_area(V, cur.F) / mean_vertex_area(V, F);
+    } else {
+      cur.F = F;
+    }
     Dd.clearConstraints();
     Dd.setMesh(cur);
-    s.addMarkers(Dd, u.detail_marker_weight);
+    s.addMarkers(Dd, u.detail_marker_weight * wscale);
     if (near.empty()) near = face_neighbourhoods(V.rows(), F);
     // the tracked points in the order of their faces at the round's start: the loops over them
     // read the mesh in order instead of at random (each point's result is its own)
@@ -240,12 +293,11 @@ static void run_rounds(FitState& s, int rounds, bool local) {
     };
     auto index_residuals = [&]() {
       const Eigen::MatrixX3d C = tracked_closest();
-      const Eigen::MatrixX3d FN = face_normals(V, F);
       std::vector<Eigen::Index> keep;
       keep.reserve(rk.size());
       for (std::size_t t = 0; t < rk.size(); ++t) {
         const Eigen::Index ci = rk[t];
-        if (N.row(ci).dot(FN.row(rf[t])) < cos_detail) continue;
+        if (N.row(ci).dot(unit_face_normal(V, F, rf[t])) < cos_detail) continue;
         if ((P.row(ci) - C.row(Eigen::Index(t))).norm() > rcap[t]) continue;
         keep.push_back(Eigen::Index(t));
       }
@@ -297,9 +349,13 @@ static void run_rounds(FitState& s, int rounds, bool local) {
     }
     std::vector<int> ids(std::size_t(V.rows()), -1);
     for (Eigen::Index j = 0; j < V.rows(); ++j) {
+      if (local && !movable[std::size_t(j)]) {
+        if (in_solve[std::size_t(j)]) Dd.addHardConstraint(int(j), V.row(j).transpose());
+        continue;
+      }
       const bool data = status[std::size_t(j)] == VertexStatus::Matched;
       const int id = Dd.addPositionConstraint(SurfacePoint::atVertex(int(j)), V.row(j).transpose(),
-                                              data ? u.detail_weight * std::sqrt(dscale(j)) : u.match_weight);
+                                              (data ? u.detail_weight * std::sqrt(dscale(j)) : u.match_weight) * wscale);
       if (data && movable[std::size_t(j)]) ids[std::size_t(j)] = id;  // held otherwise
     }
     std::vector<char> is_data(std::size_t(V.rows()), 0);
@@ -329,15 +385,22 @@ static void run_rounds(FitState& s, int rounds, bool local) {
       }
       for (Eigen::Index f = 0; f < F.rows(); ++f) {
         if (rcount(f) < 3) continue;
+        const int at = local ? solve_face[std::size_t(f)] : int(f);  // a face of the solve
+        if (at < 0) continue;
         const Eigen::RowVector3d centroid = (V.row(F(f, 0)) + V.row(F(f, 1)) + V.row(F(f, 2))) / 3.0;
-        Dd.addPositionConstraint(SurfacePoint::onFace(int(f), Eigen::Vector3d::Constant(1.0 / 3)),
-                                 (centroid + rsum.row(f) / rcount(f)).transpose(), u.detail_surface_weight);
+        Dd.addPositionConstraint(SurfacePoint::onFace(at, Eigen::Vector3d::Constant(1.0 / 3)),
+                                 (centroid + rsum.row(f) / rcount(f)).transpose(), u.detail_surface_weight * wscale);
         ++rep.detail_surface_constraints;
       }
     }
     if (!local) rep.detail_points_tracked = Eigen::Index(rk.size());
     logger()->trace("[TemplateFitting] detail round {}: set-up {:.3f} s ({} data -> surface constraints, {} points tracked)",
                     round + 1, seconds_since(t_round), rep.detail_surface_constraints, rk.size());
+    std::optional<FaceSpheres> spheres;  // of the faces, kept current by the closest-point updates
+    std::vector<int> moving_faces;        // local: the faces at a moving vertex
+    if (local)
+      for (Eigen::Index f = 0; f < F.rows(); ++f)
+        if (movable[std::size_t(F(f, 0))] || movable[std::size_t(F(f, 1))] || movable[std::size_t(F(f, 2))]) moving_faces.push_back(int(f));
     int k = 0;
     for (; k < u.detail_iterations; ++k) {
       Eigen::MatrixX3d T = Eigen::MatrixX3d::Constant(V.rows(), 3, std::numeric_limits<double>::quiet_NaN());
@@ -346,7 +409,10 @@ static void run_rounds(FitState& s, int rounds, bool local) {
           // the fit moved a little: each point's closest point among the faces around its last one
           // (the first of equally close ones in near's order). A face whose bounding sphere is
           // farther from the point than its last face is skipped: it cannot be the closest.
-          const FaceSpheres spheres(V, F);
+          // local: only the faces at a moving vertex change
+          if (!spheres) spheres.emplace(V, F);
+          else if (local) spheres->update(V, F, moving_faces);
+          else *spheres = FaceSpheres(V, F);
 #pragma omp parallel for schedule(dynamic, 1024)
           for (Eigen::Index i = 0; i < Eigen::Index(rk.size()); ++i) {
             const Eigen::Index t = by_face[std::size_t(i)];
@@ -364,7 +430,7 @@ static void run_rounds(FitState& s, int rounds, bool local) {
               Eigen::Vector3d w = w0;
               double d2 = d0;
               if (f != f0) {
-                if (spheres.fartherThan(f, p, d0)) continue;
+                if (spheres->fartherThan(f, p, d0)) continue;
                 d2 = on_face(f, w);
               }
               if (d2 < best) { best = d2; rf[std::size_t(t)] = f; rb.row(t) = w.transpose(); }

@@ -291,9 +291,12 @@ void update_point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX
   RTCScene scene = embree_face_tree(part, Eigen::Index(rows.size()), who);
   // a point whose closest face kept its corners is at most as far from every other face that did
   // (d_old): only a moved face can now be closer. Where its closest face moved, the faces that did
-  // not are at least d_old away: a moved face closer than that is the answer, otherwise the point
-  // is measured against the whole mesh again.
+  // not are at least d_old away: a moved face closer than that is the answer; otherwise the
+  // closest moved face (at dm) stands unless a face that did not move is closer, and such a face
+  // lies within dm of the point.
   std::vector<char> again(std::size_t(P.rows()), 0);
+  Eigen::VectorXd dm(P.rows());
+  Eigen::VectorXi fm(P.rows());
 #pragma omp parallel for schedule(dynamic, 1024)
   for (Eigen::Index i = 0; i < P.rows(); ++i) {
     const Eigen::Vector3d q = P.row(i).transpose();
@@ -305,26 +308,48 @@ void update_point_mesh_distances(const Eigen::MatrixX3d& V, const Eigen::MatrixX
       r.face = faces(i);
     }
     closer_face(scene, r);
-    if (kept || r.d < dist(i)) {
-      dist(i) = r.d;
-      faces(i) = r.face;
-    } else {
-      again[std::size_t(i)] = 1;
-    }
+    if (!kept && !(r.d < dist(i))) again[std::size_t(i)] = 1;
+    dist(i) = dm(i) = r.d;
+    faces(i) = fm(i) = r.face;
   }
   rtcReleaseScene(scene);
+  // those points against the faces that did not move and come within the box around their
+  // balls of radius dm (padded by 1e-9 of the coordinates against rounding): a tree over them
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
   std::vector<Eigen::Index> idx;
   for (Eigen::Index i = 0; i < P.rows(); ++i)
-    if (again[std::size_t(i)]) idx.push_back(i);
+    if (again[std::size_t(i)]) {
+      idx.push_back(i);
+      const double pad = dm(i) + 1e-9 * std::max(scale, P.row(i).cwiseAbs().maxCoeff());
+      lo = lo.cwiseMin(P.row(i).transpose() - Eigen::Vector3d::Constant(pad));
+      hi = hi.cwiseMax(P.row(i).transpose() + Eigen::Vector3d::Constant(pad));
+    }
   if (idx.empty()) return;
-  Eigen::MatrixX3d Pa(Eigen::Index(idx.size()), 3);
-  for (std::size_t k = 0; k < idx.size(); ++k) Pa.row(Eigen::Index(k)) = P.row(idx[k]);
-  Eigen::VectorXi fa;
-  const Eigen::VectorXd da = point_mesh_distances(V, F, Pa, &fa);
-  for (std::size_t k = 0; k < idx.size(); ++k) {
-    dist(idx[k]) = da(Eigen::Index(k));
-    faces(idx[k]) = fa(Eigen::Index(k));
+  std::vector<int> near;
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    if (face_moved[std::size_t(f)]) continue;
+    Eigen::Vector3d flo = V.row(F(f, 0)).transpose(), fhi = flo;
+    for (int k = 1; k < 3; ++k) {
+      flo = flo.cwiseMin(V.row(F(f, k)).transpose());
+      fhi = fhi.cwiseMax(V.row(F(f, k)).transpose());
+    }
+    if ((flo.array() <= hi.array()).all() && (fhi.array() >= lo.array()).all()) near.push_back(int(f));
   }
+  if (near.empty()) return;
+  const Triangles rest{V, F, &near};
+  RTCScene rest_scene = embree_face_tree(rest, Eigen::Index(near.size()), who);
+#pragma omp parallel for schedule(dynamic, 64)
+  for (std::size_t k = 0; k < idx.size(); ++k) {
+    const Eigen::Index i = idx[k];
+    const Eigen::Vector3d q = P.row(i).transpose();
+    Query r{&rest, q, culling_margin(scale, q)};
+    r.d = dm(i);
+    r.face = fm(i);
+    closer_face(rest_scene, r);
+    dist(i) = r.d;
+    faces(i) = r.face;
+  }
+  rtcReleaseScene(rest_scene);
 }
 
 }  // namespace tbsp
