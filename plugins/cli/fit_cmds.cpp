@@ -180,7 +180,7 @@ void add_fit_commands(CLI::App& app, CommandTable& table) {
                    "rounds of Laplacian updating after the fit, unsupported vertices held (sharper protrusions; 0 = off)");
   fitc->add_option("--pull-rounds", a->p.pull_rounds,
                    "without detail rounds: rounds that move only the vertices near regions of the cloud the fit left "
-                   "unexplained, towards those points (default 2; 0 = off)");
+                   "unexplained, towards those points (default 3; 0 = off)");
   fitc->add_option("--detail-radius-factor", a->p.detail_radius_factor,
                    "kernel radius of the detail rounds' residual matching, x r_max (default 2)");
   fitc->add_option("--detail-normal-angle", a->p.detail_normal_angle_deg,

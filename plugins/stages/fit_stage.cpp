@@ -79,7 +79,7 @@ void register_fit_stages(Registry& r) {
       ParamSpec::real("r_max", "0", "final match radius r_max, cloud units (0: from the data)", 0, 1e30),
       ParamSpec::integer("iterations", "15", "max iterations of the iterative fit", 1, 1000),
       ParamSpec::integer("detail_rounds", "0", "extra detail rounds after the fit", 0, 100),
-      ParamSpec::integer("pull_rounds", "2", "without detail rounds: local rounds drawing in regions the fit left unexplained (0 off)", 0, 100),
+      ParamSpec::integer("pull_rounds", "3", "without detail rounds: local rounds drawing in regions the fit left unexplained (0 off)", 0, 100),
       ParamSpec::integer("coarse_nodes", "0",
                          "coarse stage for parts turned about joints: nodes of its deformation graph (400 measured; 0 off, else >= 4)", 0, 20000),
       ParamSpec::boolean("estimate_scale", true, "estimate a global scale on the first frame (§5.2)"),

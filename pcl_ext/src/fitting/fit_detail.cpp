@@ -324,8 +324,17 @@ static void run_rounds(FitState& s, int rounds, bool local) {
     };
     // the vertices in the order of the grid cells they start the round in: the vertex loops
     // below read the residual grid in order (each vertex's result is its own)
+    // (local: only the moving vertices enter these loops)
     std::vector<Eigen::Index> by_cell;
-    if (u.detail_residual_matching) {
+    if (u.detail_residual_matching && local) {
+      std::vector<Eigen::Index> mv;
+      for (Eigen::Index j = 0; j < V.rows(); ++j)
+        if (movable[std::size_t(j)]) mv.push_back(j);
+      Eigen::MatrixX3d Vm(Eigen::Index(mv.size()), 3);
+      for (std::size_t k = 0; k < mv.size(); ++k) Vm.row(Eigen::Index(k)) = V.row(mv[k]);
+      const RadiusGrid cells(Vm, rd);
+      for (Eigen::Index k : cells.rows()) by_cell.push_back(mv[std::size_t(k)]);
+    } else if (u.detail_residual_matching) {
       const RadiusGrid cells(V, rd);
       by_cell.assign(cells.rows().begin(), cells.rows().end());
     }

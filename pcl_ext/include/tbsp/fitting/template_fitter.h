@@ -216,10 +216,11 @@ struct FitParameters {
   /// put it. A region's points keep pulling in the later rounds (also once they fall under the
   /// region threshold); a fit that leaves no region runs none and is unchanged. The regions'
   /// points pull as with detail_pull_unexplained (and so would a region of clutter facing the
-  /// surface: exclude it with an ROI). Each round costs one factorization and detail_iterations back-substitutions.
-  /// Default 2; 0 (off)..100; ignored with detail rounds (they pull the same regions),
+  /// surface: exclude it with an ROI). Each round solves on the moving vertices' neighbourhood
+  /// only (one small factorization, detail_iterations back-substitutions; ~0.15 s on 43k
+  /// vertices). Default 3; 0 (off)..100; ignored with detail rounds (they pull the same regions),
   /// laplacian_updating, remeshing or detail_residual_matching = false.
-  int pull_rounds = 2;
+  int pull_rounds = 3;
   /// Kernel radius of residual matching, × r_max. Default 2. [0.5, 10].
   double detail_radius_factor = 2;
   /// Residual matching: a point counts only if its normal is within this angle (degrees) of the
