@@ -5,6 +5,7 @@
 #include "test_util.h"
 #include "tbsp/core/error.h"
 #include "tbsp/deform/laplacian_deformer.h"
+#include "tbsp/mesh/cotan_laplacian.h"
 #include "tbsp/mesh/primitives.h"
 
 #ifdef _OPENMP
@@ -210,6 +211,68 @@ TEST(LaplacianDeformer, IsolatedVerticesStayPut) {
   const Eigen::MatrixX3d X = d.deform();
   EXPECT_EQ(X.row(m.V.rows() - 1), m.V.row(m.V.rows() - 1));
   EXPECT_EQ(d.report().fixed_isolated, 1);
+}
+
+// What the fitter's pull rounds rely on (fit_detail.cpp): a solve that moves only a patch, set
+// up on the faces within two rings of it (the other vertices belong to no face, so they are
+// fixed), with the patch's neighbours held exactly and the soft weights scaled by the ratio of
+// the area normalizations Ā (the mean Voronoi area of the vertices given), equals the whole
+// mesh's solve with every vertex outside the patch held exactly.
+TEST(LaplacianDeformer, APatchSolvedOnItsNeighbourhoodEqualsTheWholeMeshSolve) {
+  TriMesh m = make_icosphere(4);  // 2,562 vertices
+  for (Eigen::Index v = 0; v < m.V.rows(); ++v) m.V.row(v) *= 1 + 0.1 * std::sin(7 * m.V(v, 0)) * std::cos(5 * m.V(v, 2));
+  const Eigen::Index n = m.V.rows();
+  std::vector<char> patch(std::size_t(n), 0);  // the vertices near (0, 0, 1)
+  for (Eigen::Index v = 0; v < n; ++v) patch[std::size_t(v)] = (m.V.row(v).normalized() - Eigen::RowVector3d(0, 0, 1)).norm() < 0.5;
+  auto grow = [&](const std::vector<char>& mark) {
+    std::vector<char> out = mark;
+    for (Eigen::Index f = 0; f < m.F.rows(); ++f)
+      if (mark[std::size_t(m.F(f, 0))] || mark[std::size_t(m.F(f, 1))] || mark[std::size_t(m.F(f, 2))])
+        for (int c = 0; c < 3; ++c) out[std::size_t(m.F(f, c))] = 1;
+    return out;
+  };
+  const std::vector<char> ring = grow(patch);
+  std::vector<Eigen::Index> rows;
+  for (Eigen::Index f = 0; f < m.F.rows(); ++f)
+    if (ring[std::size_t(m.F(f, 0))] || ring[std::size_t(m.F(f, 1))] || ring[std::size_t(m.F(f, 2))]) rows.push_back(f);
+  TriMesh sub;
+  sub.V = m.V;
+  sub.F.resize(Eigen::Index(rows.size()), 3);
+  for (std::size_t k = 0; k < rows.size(); ++k) sub.F.row(Eigen::Index(k)) = m.F.row(rows[k]);
+  ASSERT_LT(sub.F.rows(), m.F.rows() / 3);
+  auto mean_area = [&](const Eigen::MatrixX3i& F) {
+    const Eigen::VectorXd A = voronoi_areas(m.V, F);
+    double sum = 0;
+    int cnt = 0;
+    for (Eigen::Index i = 0; i < A.rows(); ++i)
+      if (A(i) > 0) { sum += A(i); ++cnt; }
+    return sum / cnt;
+  };
+  const double wscale = mean_area(sub.F) / mean_area(m.F);
+  ASSERT_GT(std::abs(wscale - 1), 1e-3);  // the scaling matters here
+  std::vector<char> in_sub(std::size_t(n), 0);
+  for (Eigen::Index f = 0; f < sub.F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) in_sub[std::size_t(sub.F(f, c))] = 1;
+  auto solve = [&](const TriMesh& mesh, double scale) {
+    LaplacianDeformer d;
+    d.setMesh(mesh);
+    for (Eigen::Index v = 0; v < n; ++v) {
+      if (patch[std::size_t(v)]) {  // pulled outwards, by weights that differ per vertex
+        const Eigen::Vector3d t = 1.2 * m.V.row(v).transpose();
+        d.addPositionConstraint(SurfacePoint::atVertex(int(v)), t, (0.5 + 0.5 * double(v % 3)) * scale);
+      } else if (&mesh == &m || in_sub[std::size_t(v)]) {
+        d.addHardConstraint(int(v), m.V.row(v).transpose());
+      }
+    }
+    return d.deform();
+  };
+  const Eigen::MatrixX3d whole = solve(m, 1.0);
+  const Eigen::MatrixX3d local = solve(sub, wscale);
+  const double moved = (whole - m.V).rowwise().norm().maxCoeff();
+  ASSERT_GT(moved, 0.05);
+  EXPECT_LT(rel_err(whole, local, m.V), 1e-9) << "largest move " << moved;
+  // without the scaling the patch comes out differently
+  EXPECT_GT(rel_err(whole, solve(sub, 1.0), m.V), 1e-4);
 }
 
 TEST(LaplacianDeformer, RejectsBadConstraintsAndSingularSystems) {
