@@ -289,6 +289,20 @@ TEST(LaplacianDeformer, RejectsBadConstraintsAndSingularSystems) {
   // a weight whose square overflows (found by hand 2026-12-06: 1e300 ended in "the solution is
   // not finite"); 1e100 is the largest accepted and solves
   EXPECT_THROW(d.addPositionConstraint(SurfacePoint::atVertex(0), Eigen::Vector3d::Zero(), 1e300), InvalidInput);
+  {  // one hard constraint per vertex (the message names it); none after clearConstraints
+    LaplacianDeformer h;
+    h.setMesh(m);
+    h.addHardConstraint(3, m.V.row(3).transpose());
+    h.addPositionConstraint(SurfacePoint::atVertex(3), m.V.row(3).transpose());  // a soft one is fine
+    try {
+      h.addHardConstraint(3, Eigen::Vector3d::Zero());
+      ADD_FAILURE() << "no error for a second hard constraint";
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("vertex 3 already has a hard constraint"), std::string::npos) << e.what();
+    }
+    h.clearConstraints();
+    EXPECT_NO_THROW(h.addHardConstraint(3, Eigen::Vector3d::Zero()));
+  }
   {
     LaplacianDeformer big;
     big.setMesh(m);

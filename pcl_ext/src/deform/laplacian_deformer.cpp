@@ -174,11 +174,14 @@ void LaplacianDeformer::checkConstraint(const DeformConstraint& c, const char* w
 
 int LaplacianDeformer::addConstraint(const DeformConstraint& c) {
   checkConstraint(c, "addConstraint");
-  if (c.hard)
-    for (const auto& o : constraints_)
-      if (o.hard && o.at.vertex == c.at.vertex)
-        throw InvalidInput("[tbsp::LaplacianDeformer::addConstraint] vertex " + std::to_string(c.at.vertex) +
-                           " already has a hard constraint; move it with setPositionTarget()");
+  if (c.hard) {  // (a flag per vertex: adding n hard constraints stays O(n))
+    const std::size_t v = std::size_t(c.at.vertex);
+    if (v < hard_at_.size() && hard_at_[v])
+      throw InvalidInput("[tbsp::LaplacianDeformer::addConstraint] vertex " + std::to_string(c.at.vertex) +
+                         " already has a hard constraint; move it with setPositionTarget()");
+    if (v >= hard_at_.size()) hard_at_.resize(v + 1, 0);
+    hard_at_[v] = 1;
+  }
   DeformConstraint s = c;
   if (s.type != ConstraintType::Position) s.axis.normalize();
   constraints_.push_back(s);
@@ -214,6 +217,7 @@ int LaplacianDeformer::addPlaneConstraint(const SurfacePoint& at, const Eigen::V
 
 void LaplacianDeformer::clearConstraints() {
   constraints_.clear();
+  hard_at_.clear();
   invalidateMatrix();
 }
 

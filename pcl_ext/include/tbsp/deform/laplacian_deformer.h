@@ -245,6 +245,7 @@ private:
   Eigen::SparseMatrix<double> L_;
   Eigen::MatrixX3d delta_;
   std::vector<DeformConstraint> constraints_;
+  std::vector<char> hard_at_;  ///< per vertex: it has a hard constraint (grown on demand)
   bool use_rotation_field_ = false;
   std::vector<Eigen::Matrix3d> user_rotations_, last_rotations_;
   double scale_ = 1.0;
