@@ -62,6 +62,10 @@ public:
   FitRun& operator=(const FitRun&) = delete;
   /// FitReport::unexplained of the current shape (point_mesh_distances of the ROI points).
   std::vector<FitReport::UnexplainedRegion> regions_now() const;
+  /// The detail and pull rounds (once; finish runs them if this did not).
+  void pull();
+  /// ROI points farther than max_match_distance from the current shape.
+  Eigen::Index pointsBeyondMatchDistance() const;
   FitReport finish(TriMesh& result, std::vector<VertexStatus>& status);
 
 private:
@@ -73,6 +77,7 @@ private:
   std::vector<VertexStatus> status_;
   TriMesh aligned_;
   std::unique_ptr<fit_impl::FitState> s_;
+  bool pulled_ = false;
 };
 
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
@@ -186,6 +191,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     // without bringing it back), and only the kept fit runs them.
     const bool may_retry = params_in.coarse_nodes == -1 && params.coarse_nodes == 0 && !params.remeshing;
     const bool before_detail = may_retry && (params.detail_rounds > 0 || params.pull_rounds > 0);
+    // with pull rounds (no detail rounds) both fits run them and the choice is made after
+    const bool after_pull = before_detail && params.detail_rounds == 0;
+    std::vector<Eigen::Index> far;
     const auto t_all = Clock::now();
     // one bar over both fits: never backwards (the first fit may finish after the second ran)
     double last = 0;
@@ -215,11 +223,24 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       std::vector<VertexStatus> st2;
       FitReport rep2;
       const std::vector<FitReport::UnexplainedRegion> regions2 = checkpoint(run2, rep2, f2, st2);
-      // kept when it leaves under half the unexplained points of the first fit (sums over the
-      // regions: scattered outliers, which dominate any tail statistic of noisy scans, are not in
-      // them; the margin keeps near-equal fits from flipping on rounding)
       const Eigen::Index u1 = fit_impl::unexplained_points(regions1), u2 = fit_impl::unexplained_points(regions2);
-      const bool better = 2 * u2 < u1;
+      bool better = false;
+      if (after_pull) {
+        // both fits pull their regions in; kept: the one farther from fewer of the ROI points
+        // (the same points for both, outliers included, so the difference is the data one fit
+        // explains and the other does not; the margin keeps near-equal fits from flipping on
+        // rounding)
+        run1.pull();
+        run2.pull();
+        const Eigen::Index f1 = run1.pointsBeyondMatchDistance(), f2 = run2.pointsBeyondMatchDistance();
+        better = f2 + 10 < f1;
+        far = {f1, f2};
+      } else {
+        // kept when it leaves under half the unexplained points of the first fit (sums over the
+        // regions: scattered outliers, which dominate any tail statistic of noisy scans, are not
+        // in them; the margin keeps near-equal fits from flipping on rounding)
+        better = 2 * u2 < u1;
+      }
       if (better) {
         if (before_detail) rep2 = run2.finish(f2, st2);
         rep = std::move(rep2);
@@ -228,14 +249,23 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       } else if (before_detail) {
         rep = run1.finish(fitted, st);
       }
-      char buf[320];
-      std::snprintf(buf, sizeof buf,
-                    "%zu region(s) of the cloud (%lld points) were left unexplained%s: fitted again with the coarse stage (400 nodes), "
-                    "which leaves %lld; %s kept. ",
-                    regions1.size(), static_cast<long long>(u1), before_detail ? " before the detail rounds" : "", static_cast<long long>(u2),
-                    better ? "the coarse stage's fit" : "the first fit");
+      char buf[480];
+      if (after_pull)
+        std::snprintf(buf, sizeof buf,
+                      "%zu region(s) of the cloud (%lld points) were left unexplained before the pull rounds: fitted again with the "
+                      "coarse stage (400 nodes), which leaves %lld; after the pull rounds %lld / %lld points lie beyond r_max from "
+                      "the two fits: %s kept. ",
+                      regions1.size(), static_cast<long long>(u1), static_cast<long long>(u2), static_cast<long long>(far[0]),
+                      static_cast<long long>(far[1]), better ? "the coarse stage's fit" : "the first fit");
+      else
+        std::snprintf(buf, sizeof buf,
+                      "%zu region(s) of the cloud (%lld points) were left unexplained%s: fitted again with the coarse stage (400 nodes), "
+                      "which leaves %lld; %s kept. ",
+                      regions1.size(), static_cast<long long>(u1), before_detail ? " before the detail rounds" : "", static_cast<long long>(u2),
+                      better ? "the coarse stage's fit" : "the first fit");
       logger()->info("[TemplateFitting] {}", buf);
       rep.coarse_retry_unexplained = {u1, u2};
+      rep.coarse_retry_far = far;
       rep.coarse_retried = true;
       rep.message = buf + rep.message;
     } else if (before_detail) {
@@ -475,10 +505,21 @@ FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::
 
 std::vector<FitReport::UnexplainedRegion> FitRun::regions_now() const { return fit_impl::unexplained_regions(*s_); }
 
+void FitRun::pull() {
+  if (pulled_) return;
+  fit_impl::detail_rounds(*s_);
+  fit_impl::pull_rounds(*s_);
+  pulled_ = true;
+}
+
+Eigen::Index FitRun::pointsBeyondMatchDistance() const {
+  const fit_impl::RoiDistances& r = fit_impl::roi_distances(*s_);
+  return (r.d.array() > s_->u.max_match_distance).count();
+}
+
 FitReport FitRun::finish(TriMesh& result, std::vector<VertexStatus>& status) {
   fit_impl::FitState& s = *s_;
-  fit_impl::detail_rounds(s);
-  fit_impl::pull_rounds(s);
+  pull();
   const int known_crossings = fit_impl::repair_surface(s);
   fit_impl::compute_metrics(s, known_crossings);
   result.V = s.V;

@@ -295,10 +295,13 @@ struct FitReport {
   int coarse_nodes = 0, coarse_steps = 0;  ///< coarse stage: graph nodes, Gauss-Newton steps (0: off)
   /// with markers and coarse_nodes −1: the first fit left regions unexplained and the fit ran
   /// again with the coarse stage; the points in the two fits' unexplained regions (first, with
-  /// the coarse stage). The second is kept when it leaves under half as many (then coarse_nodes
-  /// is 400).
+  /// the coarse stage). With pull rounds (and no detail rounds) both fits run them and the
+  /// second is kept when fewer of the ROI points lie farther than r_max from it (by more than 10
+  /// points; coarse_retry_far: first, second); otherwise it is kept when it leaves under half as
+  /// many unexplained points before the detail rounds. Kept: coarse_nodes is 400.
   bool coarse_retried = false;
   std::vector<Eigen::Index> coarse_retry_unexplained;
+  std::vector<Eigen::Index> coarse_retry_far;  ///< empty unless the choice was made after the pull rounds
   /// without markers, with the coarse stage: hypotheses fitted (1 + the usable entries of
   /// FitParameters::coarse_prepass_nodes), the kept one's index (0: the coarse_nodes graph alone)
   /// and coarser graph (its nodes; 0: none), and each hypothesis's tail_mean in the order they ran
