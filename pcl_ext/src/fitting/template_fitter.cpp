@@ -188,7 +188,8 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     // automatic coarse stage with markers: off, and run in a second fit when the first leaves
     // regions of the scan unexplained (a part the markers did not turn far enough). With detail
     // or pull rounds the regions are looked at before them (the rounds draw a stuck part closer
-    // without bringing it back), and only the kept fit runs them.
+    // without bringing it back); with detail rounds only the kept fit runs them, with pull rounds
+    // (cheap) both do and the choice is made after them.
     const bool may_retry = params_in.coarse_nodes == -1 && params.coarse_nodes == 0 && !params.remeshing;
     const bool before_detail = may_retry && (params.detail_rounds > 0 || params.pull_rounds > 0);
     // with pull rounds (no detail rounds) both fits run them and the choice is made after
