@@ -74,12 +74,8 @@ void LaplacianDeformer::setMesh(const TriMesh& mesh) {
   report_progress(progress_, 0.0, "laplacian");
   L_ = laplacian(mesh_.V, mesh_.F, weights_, sliver_guard_, &cache_->C);
   if (weights_ == LaplacianWeights::Cotangent) {
-    const Eigen::VectorXd A = voronoi_areas(mesh_.V, mesh_.F);
-    double sum = 0;
-    int cnt = 0;
-    for (Eigen::Index i = 0; i < A.rows(); ++i)
-      if (A(i) > 0) { sum += A(i); ++cnt; }
-    if (cnt) L_ *= sum / cnt;  // L̂ = Ā L: units of length, scale-free weights
+    const double area = mean_voronoi_area(mesh_.V, mesh_.F);
+    if (area > 0) L_ *= area;  // L̂ = Ā L: units of length, scale-free weights
   }
   L_.makeCompressed();
   delta_ = L_ * mesh_.V;

@@ -74,6 +74,11 @@ Eigen::RowVector3d unit_face_normal(const Eigen::MatrixX3d& V, const Eigen::Matr
   return len > 0 ? Eigen::RowVector3d(n.transpose() / len) : Eigen::RowVector3d::Zero();
 }
 
+// Whether face f has a corner with mark[v] set.
+bool touches(const std::vector<char>& mark, const Eigen::MatrixX3i& F, Eigen::Index f) {
+  return mark[std::size_t(F(f, 0))] || mark[std::size_t(F(f, 1))] || mark[std::size_t(F(f, 2))];
+}
+
 // The vertices within reach of the unexplained regions (pull rounds): closer than 1.5 × the
 // farthest region's distance + the kernel radius r_d to one of the regions' points.
 std::vector<char> near_regions(const Eigen::MatrixX3d& V, const Eigen::MatrixX3d& Q, const std::vector<int>& member,
@@ -95,17 +100,6 @@ std::vector<char> near_regions(const Eigen::MatrixX3d& V, const Eigen::MatrixX3d
     out[std::size_t(j)] = found;
   }
   return out;
-}
-
-// Mean Voronoi area of the vertices of the faces F (the area normalization Ā of
-// LaplacianDeformer's cotangent Laplacian)
-double mean_vertex_area(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
-  const Eigen::VectorXd A = voronoi_areas(V, F);
-  double sum = 0;
-  int cnt = 0;
-  for (Eigen::Index i = 0; i < A.rows(); ++i)
-    if (A(i) > 0) { sum += A(i); ++cnt; }
-  return cnt ? sum / cnt : 1.0;
 }
 
 }  // namespace
@@ -207,8 +201,7 @@ static void run_rounds(FitState& s, int rounds, bool local) {
       // local: only the points that can reach a vertex that moves
       auto reaches = [&](std::size_t k) {
         if (!local || in_region[k]) return true;
-        const int f = fq(Eigen::Index(k));
-        return bool(movable[std::size_t(F(f, 0))] || movable[std::size_t(F(f, 1))] || movable[std::size_t(F(f, 2))]);
+        return touches(movable, F, fq(Eigen::Index(k)));
       };
       for (std::size_t k = 0; k < nq; ++k)
         if (fq(Eigen::Index(k)) >= 0 && dq(Eigen::Index(k)) <= std::max(3 * r, cap[k]) && reaches(k)) {
@@ -234,14 +227,17 @@ static void run_rounds(FitState& s, int rounds, bool local) {
     double wscale = 1.0;
     std::vector<char> in_solve;    // local: vertex of a face of the solve
     std::vector<int> solve_face;   // local: row of each face of F in the solve's faces (-1: none)
+    std::vector<int> moving_faces;  // local: the faces at a moving vertex
     if (local) {
       std::vector<char> ring = movable;  // and their neighbours
       for (Eigen::Index f = 0; f < F.rows(); ++f)
-        if (movable[std::size_t(F(f, 0))] || movable[std::size_t(F(f, 1))] || movable[std::size_t(F(f, 2))])
+        if (touches(movable, F, f)) {
+          moving_faces.push_back(int(f));
           for (int c = 0; c < 3; ++c) ring[std::size_t(F(f, c))] = 1;
+        }
       std::vector<Eigen::Index> rows;
       for (Eigen::Index f = 0; f < F.rows(); ++f)
-        if (ring[std::size_t(F(f, 0))] || ring[std::size_t(F(f, 1))] || ring[std::size_t(F(f, 2))]) rows.push_back(f);
+        if (touches(ring, F, f)) rows.push_back(f);
       cur.F.resize(Eigen::Index(rows.size()), 3);
       in_solve.assign(std::size_t(V.rows()), 0);
       solve_face.assign(std::size_t(F.rows()), -1);
@@ -250,7 +246,8 @@ static void run_rounds(FitState& s, int rounds, bool local) {
         solve_face[std::size_t(rows[k])] = int(k);
         for (int c = 0; c < 3; ++c) in_solve[std::size_t(F(rows[k], c))] = 1;
       }
-      wscale = mean_vertex_area(V, cur.F) / mean_vertex_area(V, F);
+      const double a_solve = mean_voronoi_area(V, cur.F), a_all = mean_voronoi_area(V, F);
+      if (a_solve > 0 && a_all > 0) wscale = a_solve / a_all;
     } else {
       cur.F = F;
     }
@@ -406,10 +403,6 @@ static void run_rounds(FitState& s, int rounds, bool local) {
     logger()->trace("[TemplateFitting] detail round {}: set-up {:.3f} s ({} data -> surface constraints, {} points tracked)",
                     round + 1, seconds_since(t_round), rep.detail_surface_constraints, rk.size());
     std::optional<FaceSpheres> spheres;  // of the faces, kept current by the closest-point updates
-    std::vector<int> moving_faces;        // local: the faces at a moving vertex
-    if (local)
-      for (Eigen::Index f = 0; f < F.rows(); ++f)
-        if (movable[std::size_t(F(f, 0))] || movable[std::size_t(F(f, 1))] || movable[std::size_t(F(f, 2))]) moving_faces.push_back(int(f));
     int k = 0;
     for (; k < u.detail_iterations; ++k) {
       Eigen::MatrixX3d T = Eigen::MatrixX3d::Constant(V.rows(), 3, std::numeric_limits<double>::quiet_NaN());

@@ -114,6 +114,15 @@ Eigen::MatrixX3d face_cotangents(const Eigen::MatrixX3d& V, const Eigen::MatrixX
   return C;
 }
 
+double mean_voronoi_area(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
+  const Eigen::VectorXd A = voronoi_areas(V, F);
+  double sum = 0;
+  int cnt = 0;
+  for (Eigen::Index i = 0; i < A.rows(); ++i)
+    if (A(i) > 0) { sum += A(i); ++cnt; }
+  return cnt ? sum / cnt : 0.0;
+}
+
 Eigen::VectorXd voronoi_areas(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
   const double delta = kMollifyMargin * mean_edge_length(V, F);
   Eigen::VectorXd A = Eigen::VectorXd::Zero(V.rows());

@@ -46,6 +46,10 @@ Eigen::MatrixX3d face_cotangents(const Eigen::MatrixX3d& V, const Eigen::MatrixX
 /// of all vertices sum to the surface area. Isolated vertices get 0. O(#F).
 Eigen::VectorXd voronoi_areas(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F);
 
+/// \brief Mean of voronoi_areas over the vertices of the faces F (isolated vertices left out;
+/// 0 when no vertex has an area): LaplacianDeformer's area normalization Ā (L̂ = Ā L). O(#F).
+double mean_voronoi_area(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F);
+
 /// \brief Uniform graph Laplacian (symmetric): off-diagonal 1 per edge, diagonal −degree.
 Eigen::SparseMatrix<double> uniform_graph_laplacian(const Eigen::MatrixX3i& F, Eigen::Index num_vertices);
 
