@@ -136,10 +136,10 @@ nlohmann::json fit_report_json(const FitReport& r) {
     if (r.coarse_hypotheses > 1)
       j["coarse_stage"]["hypotheses"] = {{"count", r.coarse_hypotheses}, {"kept", r.coarse_kept}, {"kept_prepass_nodes", r.coarse_prepass_nodes}, {"tail_means", r.coarse_scores}};
   }
-  if (r.coarse_retried) {  // the first fit (no coarse stage) left regions unexplained: fitted again with it
-    j["coarse_retry"] = {{"kept", r.coarse_nodes > 0 ? "coarse stage" : "first fit"}, {"unexplained_points", r.coarse_retry_unexplained}};
-    if (!r.coarse_retry_far.empty()) j["coarse_retry"]["points_beyond_r_max"] = r.coarse_retry_far;
-  }
+  if (!r.coarse_far_points.empty())  // with markers and the default coarse_nodes: fitted without and with the coarse stage
+    j["coarse_compare"] = {{"compared", r.coarse_compared},
+                           {"kept", r.coarse_nodes > 0 ? "coarse stage" : "without"},
+                           {"points_beyond_r_max", r.coarse_far_points}};
   const auto& u = r.used;
   j["parameters"] = {{"max_match_distance", u.max_match_distance}, {"initial_match_distance", u.initial_match_distance},
                      {"max_normal_angle_deg", u.max_normal_angle_deg}, {"max_iterations", u.max_iterations},

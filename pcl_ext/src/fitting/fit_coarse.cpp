@@ -48,8 +48,9 @@ struct Pair {
 
 // One graph of `nodes` nodes built on X and fitted to the cloud over the stiffness schedule;
 // returns the deformed template (all vertices), adds the Gauss-Newton steps to `steps_run` and
-// sets `node_count` to the graph's nodes.
-Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, int& steps_run, int& node_count) {
+// sets `node_count` to the graph's nodes. Progress from `lo` to `hi` over the rounds (a stop
+// asked for through it is seen within one step).
+Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, int& steps_run, int& node_count, double lo, double hi) {
   const Eigen::Index nv = X0.rows();
   DeformationGraph graph;
   graph.build(X0, s.F, nodes, 4);
@@ -73,6 +74,7 @@ Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, i
     const double radius = r_start * std::pow(r_end / r_start, f);
     const double stiff = a_start * std::pow(a_end / a_start, f);
     for (int step = 0; step < s.u.coarse_steps; ++step) {
+      report_progress(s.progress, lo + (hi - lo) * (round + double(step) / s.u.coarse_steps) / rounds, "coarse stage");
 #pragma omp parallel for schedule(static)
       for (std::size_t k = 0; k < vs.size(); ++k) {
         const int v = int(vs[k]);
@@ -145,10 +147,10 @@ void coarse_stage(FitState& s) {
   // regions (a head, a limb) turn as wholes towards the data, then the fine graph from there
   Eigen::MatrixX3d X = s.V;
   if (s.coarse_prepass > 0 && s.coarse_prepass < s.u.coarse_nodes) {
-    X = fit_graph(s, X, s.coarse_prepass, steps_run, nodes);
+    X = fit_graph(s, X, s.coarse_prepass, steps_run, nodes, 0.08, 0.09);
     rep.coarse_prepass_nodes = nodes;
   }
-  X = fit_graph(s, X, s.u.coarse_nodes, steps_run, nodes);
+  X = fit_graph(s, X, s.u.coarse_nodes, steps_run, nodes, s.coarse_prepass > 0 ? 0.09 : 0.08, 0.1);
   // the later stages refine the coarse shape: it becomes their rest shape (its Laplacian
   // coordinates carry the template's detail as the graph turned it), at scale 1, no rotations
   s.coarse.V = X;

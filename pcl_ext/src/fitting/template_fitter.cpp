@@ -37,31 +37,19 @@ struct SharedWork {
   std::optional<SimilarityIcpResult> alignment;
 };
 
-// What the coarse-stage retry of a fit with markers takes from the first fit: the same markers
-// pose the same template on the same cloud, so the initial deformation and the global scale
-// (stage 1) are those of the first fit; the coarse stage then replaces the deformer's rest shape,
-// so nothing else of stage 1 carries over. Results are identical to computing it again. Empty
-// (V without rows) until the first fit fills it; the retry's report gives the first fit's times.
-struct InitialPose {
-  Eigen::MatrixX3d V;  ///< the posed template, scaled
-  double scale = 1, t_initial = 0, t_scale = 0;
-  std::string message;  ///< what stage 1 added to the report's message
-};
-
 // One fit in two parts: the constructor runs it up to the detail rounds (alignment, initial pose,
 // coarse stage, iterations, propagation), finish() does the rest (detail rounds, repair, metrics).
-// In between regions_now() tells which regions of the cloud the fit so far leaves unexplained, so
-// a fit with markers can decide on the coarse-stage retry before it spends the detail rounds.
+// In between pointsBeyondMatchDistance() tells how much of the cloud the fit so far leaves
+// unexplained, so a fit with markers can compare its fits without and with the coarse stage
+// before it spends the detail rounds on one of them.
 // Holds references to the template, markers and (shared) cloud: they must outlive it.
 class FitRun {
 public:
   FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const std::vector<FitMarker>& markers,
          const RegionOfInterest& roi, const FitParameters& params, ProgressCallback progress, bool orient_normals, int coarse_prepass,
-         SharedWork* shared = nullptr, InitialPose* pose = nullptr);
+         SharedWork* shared = nullptr);
   FitRun(const FitRun&) = delete;
   FitRun& operator=(const FitRun&) = delete;
-  /// FitReport::unexplained of the current shape (point_mesh_distances of the ROI points).
-  std::vector<FitReport::UnexplainedRegion> regions_now() const;
   /// The detail and pull rounds (once; finish runs them if this did not).
   void pull();
   /// ROI points farther than max_match_distance from the current shape.
@@ -159,7 +147,7 @@ void warn_if_unexplained(FitReport& rep) {
                 rep.unexplained.size(), rep.unexplained.size() > 1 ? "s" : "", rep.unexplained.size() > 1 ? "are" : "is",
                 static_cast<long long>(r.points), r.centre.x(), r.centre.y(), r.centre.z(), 100 * r.max_distance / d);
   std::string msg = buf;
-  if (rep.used.coarse_nodes <= 0 && !rep.coarse_retried)
+  if (rep.used.coarse_nodes <= 0 && !rep.coarse_compared)
     msg += "This fit ran without the coarse stage, which turns such parts back (FitParameters::coarse_nodes = 400, "
            "`tbsp fit --coarse-nodes 400`). ";
   rep.message += msg;
@@ -170,6 +158,122 @@ void warn_if_unexplained(FitReport& rep) {
 ProgressCallback sub_progress(const ProgressCallback& progress, double lo, double hi) {
   if (!progress) return {};
   return [&progress, lo, hi](double f, const std::string& stage) { return progress(lo + (hi - lo) * f, stage); };
+}
+
+// With markers and coarse_nodes −1: the fit runs twice, without the coarse stage and with it
+// (400 nodes), side by side on two threads when OpenMP allows more than one (each fit's OpenMP
+// loops on its share; a fit's result does not depend on the thread count, so neither does the
+// choice). Both run their pull rounds (with detail rounds: the choice is made before them and
+// only the kept fit runs them); kept: the fit from which fewer ROI points lie farther than
+// r_max, the fit without the coarse stage unless the other has more than 10 points and 1 %
+// fewer (the same points for both, outliers included, so the difference is the data one fit
+// explains and the other does not; the margin keeps near-equal fits from flipping on rounding,
+// and where the data cannot tell, the template's own shape in holes is kept rather than the
+// graph's).
+FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
+                                            const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
+                                            TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
+                                            bool orient_normals) {
+  const auto t_all = Clock::now();
+  check_fit_inputs(templ, P_in, N_in, params);
+  const ScopedBlasThreads blas_threads(1);  // before the workers: their own scopes then keep 1
+  SharedWork shared;
+  shared.cloud = fit_impl::prepare_cloud(P_in, N_in, roi, params.normal_neighbours);
+  FitParameters with_coarse = params;
+  with_coarse.coarse_nodes = 400;
+  const bool after_pull = params.detail_rounds == 0;
+  std::unique_ptr<FitRun> runs[2];
+  Eigen::Index far[2] = {0, 0};
+  std::vector<std::exception_ptr> errors(2);
+  double fraction[2] = {0, 0}, shown = 0;
+  std::mutex m;
+  // stop: both fits (the caller asked to, or one failed); skip: the coarse stage's fit is not needed
+  std::atomic<bool> stop{false}, skip{false}, caller_stop{false};
+  // one bar: the mean of the two fits' fractions, never backwards
+  auto progress_of = [&](int h) -> ProgressCallback {
+    return [&, h](double f, const std::string& stage) {
+      if (stop.load() || (h == 1 && skip.load())) return false;
+      if (!progress) return true;
+      std::lock_guard<std::mutex> lock(m);
+      fraction[h] = f;
+      shown = std::max(shown, 0.5 * (fraction[0] + fraction[1]));
+      if (progress(shown, stage)) return true;
+      stop = caller_stop = true;
+      return false;
+    };
+  };
+#ifdef _OPENMP
+  const int budget = std::max(1, omp_get_max_threads());
+#else
+  const int budget = 1;
+#endif
+  const int omp_each = std::max(1, budget / 2);
+  auto work = [&](int h) {
+#ifdef _OPENMP
+    if (budget >= 2) omp_set_num_threads(omp_each);  // this thread's OpenMP regions only
+#endif
+    try {
+      if (stop.load()) return;
+      runs[h] = std::make_unique<FitRun>(templ, P_in, N_in, markers, roi, h ? with_coarse : params, progress_of(h), orient_normals, 0,
+                                         &shared);
+      if (after_pull) runs[h]->pull();
+      far[h] = runs[h]->pointsBeyondMatchDistance();
+      // the coarse stage's fit can only be kept with more than 10 points fewer (below)
+      if (h == 0 && far[0] <= 10) skip = true;
+    } catch (...) {
+      errors[std::size_t(h)] = std::current_exception();
+      if (!(h == 1 && skip.load())) stop = true;
+    }
+  };
+  bool side_by_side = false;
+  {
+#ifdef _OPENMP
+    const int own = omp_get_max_threads();
+#endif
+    std::thread other;
+    if (budget >= 2) {
+      try {
+        other = std::thread(work, 1);
+        side_by_side = true;
+      } catch (const std::system_error&) {  // no thread to be had: one after the other
+      }
+    }
+    work(0);
+    if (side_by_side) other.join();
+    else if (!skip.load()) work(1);
+#ifdef _OPENMP
+    omp_set_num_threads(own);
+#endif
+  }
+  const bool skipped = skip.load() && !(runs[1] && errors[1] == nullptr);  // (it may have finished first)
+  if (skipped && !caller_stop.load()) errors[1] = nullptr;  // stopped here, not by the caller
+  if (const std::exception_ptr e = first_real_error(errors)) std::rethrow_exception(e);
+  // counts within 10 points or 1 % of each other are a tie (scans with many outliers have many
+  // points far from both fits, and their count moves with any small change of either)
+  const int kept = !skipped && far[1] + std::max<Eigen::Index>(10, far[0] / 100) < far[0] ? 1 : 0;
+  fraction[1 - kept] = 1.0;  // the bar follows the kept fit's remaining steps
+  FitReport rep = runs[kept]->finish(result, status);
+  char buf[400];
+  if (skipped)
+    std::snprintf(buf, sizeof buf,
+                  "%lld of the ROI points lie beyond r_max from the fit without the coarse stage%s: the fit with it (400 nodes) "
+                  "could not explain more than 10 points more and was %s. ",
+                  static_cast<long long>(far[0]), after_pull ? " after the pull rounds" : " before the detail rounds",
+                  side_by_side ? "stopped" : "not run");
+  else
+    std::snprintf(buf, sizeof buf,
+                  "fitted without and with the coarse stage (400 nodes)%s: %lld / %lld of the ROI points lie beyond r_max from the "
+                  "two fits%s; %s kept. ",
+                  side_by_side ? " side by side" : "", static_cast<long long>(far[0]), static_cast<long long>(far[1]),
+                  after_pull ? " after the pull rounds" : " before the detail rounds", kept ? "the coarse stage's fit" : "the fit without it");
+  logger()->info("[TemplateFitting] {}", buf);
+  rep.coarse_compared = !skipped;
+  if (skipped) rep.coarse_far_points = {far[0]};
+  else rep.coarse_far_points = {far[0], far[1]};
+  rep.message = buf + rep.message;
+  rep.t_total = seconds_since(t_all);
+  report_progress(progress, 1.0, "done");
+  return rep;
 }
 
 }  // namespace
@@ -183,100 +287,19 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   FitParameters params = params_in;
   if (params.coarse_nodes == -1) params.coarse_nodes = markerless && params.align_without_markers ? 400 : 0;
   if (!markerless) {
+    // with markers and coarse_nodes −1: the fit without and the fit with the coarse stage, side
+    // by side, and the one that explains more of the scan kept (below)
+    const bool compare = params_in.coarse_nodes == -1 && params.coarse_nodes == 0 && !params.remeshing;
     TriMesh fitted;
     std::vector<VertexStatus> st;
-    // automatic coarse stage with markers: off, and run in a second fit when the first leaves
-    // regions of the scan unexplained (a part the markers did not turn far enough). With detail
-    // or pull rounds the regions are looked at before them (the rounds draw a stuck part closer
-    // without bringing it back); with detail rounds only the kept fit runs them, with pull rounds
-    // (cheap) both do and the choice is made after them.
-    const bool may_retry = params_in.coarse_nodes == -1 && params.coarse_nodes == 0 && !params.remeshing;
-    const bool before_detail = may_retry && (params.detail_rounds > 0 || params.pull_rounds > 0);
-    // with pull rounds (no detail rounds) both fits run them and the choice is made after
-    const bool after_pull = before_detail && params.detail_rounds == 0;
-    std::vector<Eigen::Index> far;
-    const auto t_all = Clock::now();
-    // one bar over both fits: never backwards (the first fit may finish after the second ran)
-    double last = 0;
-    const ProgressCallback mono = [&progress, &last](double f, const std::string& stage) {
-      last = std::max(last, f);
-      return progress ? progress(last, stage) : true;
-    };
-    // where the retry is decided: before the detail rounds, or on the finished fit
-    auto checkpoint = [before_detail](FitRun& run, FitReport& r, TriMesh& m, std::vector<VertexStatus>& v) {
-      if (before_detail) return run.regions_now();
-      r = run.finish(m, v);
-      return r.unexplained;
-    };
     FitReport rep;
-    // a retry shares the first fit's prepared cloud and stage 1
-    SharedWork shared;
-    InitialPose pose;
-    FitRun run1(templ, P_in, N_in, markers, roi, params, may_retry ? sub_progress(mono, 0.0, 0.55) : progress, orient_normals, 0,
-                may_retry ? &shared : nullptr, may_retry ? &pose : nullptr);
-    const std::vector<FitReport::UnexplainedRegion> regions1 = checkpoint(run1, rep, fitted, st);
-    if (!before_detail) require_a_match(rep, templ, P_in, !markers.empty());
-    if (may_retry && !regions1.empty()) {
-      FitParameters with_coarse = params;
-      with_coarse.coarse_nodes = 400;
-      FitRun run2(templ, P_in, N_in, markers, roi, with_coarse, sub_progress(mono, 0.55, 1.0), orient_normals, 0, &shared, &pose);
-      TriMesh f2;
-      std::vector<VertexStatus> st2;
-      FitReport rep2;
-      const std::vector<FitReport::UnexplainedRegion> regions2 = checkpoint(run2, rep2, f2, st2);
-      const Eigen::Index u1 = fit_impl::unexplained_points(regions1), u2 = fit_impl::unexplained_points(regions2);
-      bool better = false;
-      if (after_pull) {
-        // both fits pull their regions in; kept: the one farther from fewer of the ROI points
-        // (the same points for both, outliers included, so the difference is the data one fit
-        // explains and the other does not; the margin keeps near-equal fits from flipping on
-        // rounding)
-        run1.pull();
-        run2.pull();
-        const Eigen::Index f1 = run1.pointsBeyondMatchDistance(), f2 = run2.pointsBeyondMatchDistance();
-        better = f2 + 10 < f1;
-        far = {f1, f2};
-      } else {
-        // kept when it leaves under half the unexplained points of the first fit (sums over the
-        // regions: scattered outliers, which dominate any tail statistic of noisy scans, are not
-        // in them; the margin keeps near-equal fits from flipping on rounding)
-        better = 2 * u2 < u1;
-      }
-      if (better) {
-        if (before_detail) rep2 = run2.finish(f2, st2);
-        rep = std::move(rep2);
-        fitted = std::move(f2);
-        st = std::move(st2);
-      } else if (before_detail) {
-        rep = run1.finish(fitted, st);
-      }
-      char buf[480];
-      if (after_pull)
-        std::snprintf(buf, sizeof buf,
-                      "%zu region(s) of the cloud (%lld points) were left unexplained before the pull rounds: fitted again with the "
-                      "coarse stage (400 nodes), which leaves %lld; after the pull rounds %lld / %lld points lie beyond r_max from "
-                      "the two fits: %s kept. ",
-                      regions1.size(), static_cast<long long>(u1), static_cast<long long>(u2), static_cast<long long>(far[0]),
-                      static_cast<long long>(far[1]), better ? "the coarse stage's fit" : "the first fit");
-      else
-        std::snprintf(buf, sizeof buf,
-                      "%zu region(s) of the cloud (%lld points) were left unexplained%s: fitted again with the coarse stage (400 nodes), "
-                      "which leaves %lld; %s kept. ",
-                      regions1.size(), static_cast<long long>(u1), before_detail ? " before the detail rounds" : "", static_cast<long long>(u2),
-                      better ? "the coarse stage's fit" : "the first fit");
-      logger()->info("[TemplateFitting] {}", buf);
-      rep.coarse_retry_unexplained = {u1, u2};
-      rep.coarse_retry_far = far;
-      rep.coarse_retried = true;
-      rep.message = buf + rep.message;
-    } else if (before_detail) {
-      rep = run1.finish(fitted, st);
+    if (!compare) {
+      FitRun run(templ, P_in, N_in, markers, roi, params, progress, orient_normals, 0);
+      rep = run.finish(fitted, st);
+    } else {
+      rep = fit_with_and_without_coarse_stage(templ, P_in, N_in, markers, roi, params, fitted, st, progress, orient_normals);
     }
-    if (before_detail) require_a_match(rep, templ, P_in, !markers.empty());
-    if (may_retry) {
-      rep.t_total = seconds_since(t_all);
-      report_progress(progress, 1.0, "done");
-    }
+    require_a_match(rep, templ, P_in, !markers.empty());
     warn_if_crumpled(rep, templ);
     warn_if_unexplained(rep);
     result = std::move(fitted);
@@ -466,7 +489,7 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
 
 FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const std::vector<FitMarker>& markers,
                const RegionOfInterest& roi, const FitParameters& params, ProgressCallback progress, bool orient_normals,
-               int coarse_prepass, SharedWork* shared, InitialPose* pose)
+               int coarse_prepass, SharedWork* shared)
     : t_all_(Clock::now()), blas_threads_(1), progress_(std::move(progress)) {
   // (one BLAS thread: no contention with our OpenMP loops, blas_threads.h)
   check_fit_inputs(templ, P_in, N_in, params);
@@ -484,27 +507,12 @@ FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::
     fit_impl::align_without_markers(s, aligned_);
     s.useTemplate(aligned_);
   }
-  // stage 1 (+ global scale); `pose`: taken from the fit that filled it, or kept for the next
-  if (pose && pose->V.rows() == templ.V.rows() && s.u.coarse_nodes > 0 && !markers.empty()) {
-    s.V = pose->V;
-    s.V0 = s.V;
-    s.F = s.templ().F;
-    rep_.scale = pose->scale;
-    rep_.t_initial = pose->t_initial;
-    rep_.t_scale = pose->t_scale;
-    rep_.message += pose->message;
-  } else {
-    const std::size_t m0 = rep_.message.size();
-    fit_impl::initial_pose(s);
-    if (pose) *pose = {s.V, rep_.scale, rep_.t_initial, rep_.t_scale, rep_.message.substr(m0)};
-  }
+  fit_impl::initial_pose(s);  // stage 1 (+ global scale)
   fit_impl::orient_cloud_normals(s);
   fit_impl::coarse_stage(s);
   fit_impl::iterate_fit(s);              // stage 2
   fit_impl::propagate_displacements(s);  // stage 3
 }
-
-std::vector<FitReport::UnexplainedRegion> FitRun::regions_now() const { return fit_impl::unexplained_regions(*s_); }
 
 void FitRun::pull() {
   if (pulled_) return;

@@ -8,9 +8,10 @@
 ///  1. initial deformation with the rotation field (eq. 3.12) from the markers;
 ///  2. global scale λ from ratios of Dijkstra geodesics between markers (§5.2), iterated to a
 ///     fixed point (the thesis does one step; data ×3 out of scale needs a few) and re-solve;
-///  2b. coarse stage (coarse_nodes > 0; by default only without markers): a deformation graph
-///     fitted to the cloud by stiffness-annealed non-rigid ICP (DeformationGraph), for parts
-///     turned about joints; its result is the rest shape of the steps below;
+///  2b. coarse stage (coarse_nodes > 0; by default without markers, and with markers as the second
+///     of two fits compared on the data): a deformation graph fitted to the cloud by
+///     stiffness-annealed non-rigid ICP (DeformationGraph), for parts turned about joints; its
+///     result is the rest shape of the steps below;
 ///  3. iterative matching (§5.3): per template vertex the cloud points within r_max whose normals
 ///     deviate ≤ θ_max, averaged with the quadratic B-spline kernel, projected on the vertex
 ///     normal; weighted constraints; re-solve until the largest vertex move < tolerance;
@@ -140,15 +141,17 @@ struct FitParameters {
   int auto_markers = 30;
   /// Nodes of the embedded deformation graph of the coarse stage (a stiffness-annealed
   /// non-rigid ICP between the initial deformation and the §5.3 iterations; follows parts turned
-  /// about joints; fit_coarse.cpp). Default −1 (automatic): 400 for a fit without markers that
-  /// aligns the template itself (align_without_markers, auto_markers > 0, no remeshing), where
-  /// nothing else can follow a turned part; off with markers, where it pays for pose differences
-  /// of 30-45° and costs a little accuracy when the markers already pose the template well
-  /// (docs/fitting.md). With markers, −1 also runs the fit a second time with 400 nodes when the
-  /// first leaves regions of the scan unexplained (FitReport::unexplained: a part the markers did
-  /// not turn far enough) and keeps that fit when it leaves under half as many points unexplained
-  /// (FitReport::coarse_retried); with detail_rounds the regions are measured before the rounds
-  /// and only the kept fit runs them. 400 is the measured setting. −1, 0 (off) or 4..20000.
+  /// about joints; fit_coarse.cpp). Default −1 (automatic): without markers (a fit that aligns the
+  /// template itself: align_without_markers, auto_markers > 0), 400, since nothing else can follow
+  /// a turned part; with markers (no remeshing) the fit runs twice, without the coarse stage and
+  /// with 400 nodes, side by side on two threads when OpenMP allows, and keeps the fit from which
+  /// fewer ROI points lie farther than r_max after the pull rounds (the one without unless the
+  /// other has more than 10 and 1 % fewer: where the data cannot tell, the template's own shape
+  /// in holes is kept; FitReport::coarse_compared). With detail_rounds the choice is made before
+  /// them and only the kept fit runs them. Where the fit without the coarse stage leaves 10 points
+  /// or fewer beyond r_max the other is stopped; otherwise the comparison costs the slower fit's
+  /// time (measured 1.6-3 × one fit without the coarse stage on two cores, docs/fitting.md).
+  /// 400 is the measured setting. −1, 0 (off) or 4..20000.
   int coarse_nodes = -1;
   /// Without markers (the auto_markers flow) and with the coarse stage on: one more hypothesis
   /// per entry. The whole fit runs once with the coarse_nodes graph alone and once per entry with
@@ -293,15 +296,14 @@ struct FitReport {
   double alignment_rotation_deg = 0, alignment_scale = 1, alignment_rms = 0;
   int alignment_iterations = 0;
   int coarse_nodes = 0, coarse_steps = 0;  ///< coarse stage: graph nodes, Gauss-Newton steps (0: off)
-  /// with markers and coarse_nodes −1: the first fit left regions unexplained and the fit ran
-  /// again with the coarse stage; the points in the two fits' unexplained regions (first, with
-  /// the coarse stage). With pull rounds (and no detail rounds) both fits run them and the
-  /// second is kept when fewer of the ROI points lie farther than r_max from it (by more than 10
-  /// points; coarse_retry_far: first, second); otherwise it is kept when it leaves under half as
-  /// many unexplained points before the detail rounds. Kept: coarse_nodes is 400.
-  bool coarse_retried = false;
-  std::vector<Eigen::Index> coarse_retry_unexplained;
-  std::vector<Eigen::Index> coarse_retry_far;  ///< empty unless the choice was made after the pull rounds
+  /// with markers and coarse_nodes −1: the fit ran without and with the coarse stage
+  /// (FitParameters::coarse_nodes); coarse_far_points: the ROI points farther than r_max from
+  /// each (without, with) where the choice was made (after the pull rounds, or before the detail
+  /// rounds). Kept: coarse_nodes is 400 when the coarse stage's fit was. When the fit without it
+  /// leaves 10 points or fewer there, the other cannot be kept and is stopped (not compared;
+  /// coarse_far_points holds the one count).
+  bool coarse_compared = false;
+  std::vector<Eigen::Index> coarse_far_points;
   /// without markers, with the coarse stage: hypotheses fitted (1 + the usable entries of
   /// FitParameters::coarse_prepass_nodes), the kept one's index (0: the coarse_nodes graph alone)
   /// and coarser graph (its nodes; 0: none), and each hypothesis's tail_mean in the order they ran
