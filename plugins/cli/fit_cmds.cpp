@@ -170,8 +170,8 @@ void add_fit_commands(CLI::App& app, CommandTable& table) {
   fitc->add_option("--match-weight", a->p.match_weight, "weight of data constraints");
   fitc->add_option("--coarse-nodes", a->p.coarse_nodes,
                    "coarse stage: nodes of a deformation graph fitted to the scan before the iterations, for parts "
-                   "turned about joints (400 is the measured setting; default -1: 400 without markers; with markers off, and a "
-                   "second fit with 400 when the first leaves regions of the scan unexplained; 0 = off)");
+                   "turned about joints (400 is the measured setting; default -1: 400 without markers; with markers the fit runs "
+                   "without and with 400 nodes side by side and keeps the one fewer scan points lie far from; 0 = off)");
   fitc->add_option("--coarse-prepass-nodes", a->p.coarse_prepass_nodes,
                    "without markers, with --coarse-nodes: comma-separated nodes of coarser graphs, each fitted first in one "
                    "more hypothesis; the fit closest to the scan is kept (default 100,200; 0 = one hypothesis)")
