@@ -160,6 +160,15 @@ ProgressCallback sub_progress(const ProgressCallback& progress, double lo, doubl
   return [&progress, lo, hi](double f, const std::string& stage) { return progress(lo + (hi - lo) * f, stage); };
 }
 
+// The OpenMP threads a fit may use (1 without OpenMP).
+int omp_thread_budget() {
+#ifdef _OPENMP
+  return std::max(1, omp_get_max_threads());
+#else
+  return 1;
+#endif
+}
+
 // With markers and coarse_nodes −1: the fit runs twice, without the coarse stage and with it
 // (400 nodes), side by side on two threads when OpenMP allows more than one (each fit's OpenMP
 // loops on its share; a fit's result does not depend on the thread count, so neither does the
@@ -202,11 +211,7 @@ FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::M
       return false;
     };
   };
-#ifdef _OPENMP
-  const int budget = std::max(1, omp_get_max_threads());
-#else
-  const int budget = 1;
-#endif
+  const int budget = omp_thread_budget();
   const int omp_each = std::max(1, budget / 2);
   auto work = [&](int h) {
 #ifdef _OPENMP
@@ -366,11 +371,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       return false;
     };
   };
-#ifdef _OPENMP
-  const int budget = std::max(1, omp_get_max_threads());
-#else
-  const int budget = 1;
-#endif
+  const int budget = omp_thread_budget();
   // one thread per hypothesis whenever more than one is allowed: three equal fits on two cores
   // take ~1.5 fits' time as three threads, two fits' time as two (bunny without markers, 2026-12-06:
   // 2.45-2.58 s against 3.02-3.05 s; one after the other 3.95-4.06 s)
