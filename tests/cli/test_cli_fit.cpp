@@ -84,6 +84,11 @@ TEST(CliFit, FitsAScanAndWritesReportStatusAndPng) {
   EXPECT_EQ(j["metrics"]["self_intersections"].get<int>(), -1);  // not checked without --fairing
   ASSERT_TRUE(j["unexplained_regions"].is_array());
   EXPECT_TRUE(j["unexplained_regions"].empty()) << j["unexplained_regions"].dump();  // the fit explains the scan
+  // with markers the defaults fit without and with the coarse stage and say which they kept
+  ASSERT_TRUE(j.contains("coarse_compare")) << j.dump();
+  const nlohmann::json& cc = j["coarse_compare"];
+  EXPECT_EQ(cc["points_beyond_r_max"].size(), cc["compared"].get<bool>() ? 2u : 1u) << cc.dump();
+  EXPECT_EQ(cc["kept"].get<std::string>() == "coarse stage", j.contains("coarse_stage")) << cc.dump();
   // detail rounds: same connectivity, the report says what they did, the fit is not worse
   const std::string out2 = (dir / "fit_detail.ply").string(), rep2 = (dir / "r2.json").string();
   ASSERT_EQ(run_code("fit -q --template " + tpath + " --cloud " + cloud + " --markers " + (dir / "markers.json").string() +
