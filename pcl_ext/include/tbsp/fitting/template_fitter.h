@@ -150,7 +150,7 @@ struct FitParameters {
   /// in holes is kept; FitReport::coarse_compared). With detail_rounds the choice is made before
   /// them and only the kept fit runs them. Where the fit without the coarse stage leaves 10 points
   /// or fewer beyond r_max the other is stopped; otherwise the comparison costs the slower fit's
-  /// time (measured 1.6-3 × one fit without the coarse stage on two cores, docs/fitting.md) and
+  /// time (measured 1.6-3.6 × one fit without the coarse stage on two cores, docs/fitting.md) and
   /// about twice one fit's peak memory.
   /// 400 is the measured setting. −1, 0 (off) or 4..20000.
   int coarse_nodes = -1;
