@@ -136,11 +136,10 @@ static void run_rounds(FitState& s, int rounds, bool local) {
   std::vector<std::vector<int>> near;  // face_neighbourhoods, built when a round first needs them
   LaplacianDeformer Dd;  // one for all rounds: the solver keeps its symbolic analysis
   Dd.setUseRotationField(false);
-  // the ROI points (rows of Q) and their cloud indices: the same every round
+  // the cloud indices of the ROI points (the rows of roi_distances' Q): the same every round
   std::vector<Eigen::Index> qi;
   for (Eigen::Index i = 0; i < np; ++i)
     if (roi_ok[std::size_t(i)]) qi.push_back(i);
-  const Eigen::MatrixX3d Q = roi_points(s.cloud);
   const std::size_t nq = qi.size();
   // local: the points of any round's regions keep pulling (by their first region's reach) and
   // the vertices near them keep moving, so a part is drawn in all the way and not only until
@@ -164,6 +163,7 @@ static void run_rounds(FitState& s, int rounds, bool local) {
       const RoiDistances& measured = roi_distances(s);
       const Eigen::VectorXi& fq = measured.f;
       const Eigen::VectorXd& dq = measured.d;
+      const Eigen::MatrixX3d& Q = measured.Q;
       // points of the regions the fit leaves unexplained (a part the fit has not reached: the
       // tip of a thin ear folded back) are tracked at any distance and pull by their whole
       // residual; scattered far points (outliers) form no region and stay ignored

@@ -29,9 +29,10 @@
 namespace tbsp {
 namespace {
 
-// What the passes and hypotheses of one fit without markers share: they fit the same template
-// to the same cloud, so the prepared cloud and the similarity alignment are computed once (by
-// the first pass) and reused; results are identical to computing them each time.
+// What the passes and hypotheses of one fit without markers, or the two compared fits of one
+// with markers, share: they fit the same template to the same cloud, so the prepared cloud and
+// the similarity alignment are computed once and reused; results are identical to computing
+// them each time.
 struct SharedWork {
   std::optional<fit_impl::PreparedCloud> cloud;
   std::optional<SimilarityIcpResult> alignment;
