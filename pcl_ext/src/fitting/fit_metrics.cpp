@@ -83,6 +83,13 @@ Eigen::MatrixX3d roi_points(const PreparedCloud& c) {
   return Q;
 }
 
+bool is_surface_point(const PreparedCloud& c, const Eigen::Vector3d& q) {
+  std::vector<Eigen::Index> idx;
+  std::vector<double> d2;
+  c.search.knn(q, 5, idx, d2);  // the point itself and 4 others
+  return d2.size() == 5 && d2[4] <= 9 * c.spacing * c.spacing;
+}
+
 const RoiDistances& roi_distances(FitState& s) {
   RoiDistances& r = s.roi_dist;
   if (r.V.rows() == 0) r.Q = roi_points(s.cloud);

@@ -231,6 +231,10 @@ int repair_surface(FitState& s);
 void compute_metrics(FitState& s, int known_crossings);
 /// The cloud's ROI points, in order.
 Eigen::MatrixX3d roi_points(const PreparedCloud& c);
+/// Whether at least 4 other points of the cloud lie within 3 × its median spacing of the cloud
+/// point q: a point of a sampled surface, not an isolated one (a stray outlier, which no fit
+/// explains). O(log n).
+bool is_surface_point(const PreparedCloud& c, const Eigen::Vector3d& q);
 /// Distances and closest faces of the ROI points to the current shape s.V, s.F: exactly what
 /// point_mesh_distances gives, measured again only where the shape moved since the last call
 /// (update_point_mesh_distances; all of it when F changed or over a quarter of the vertices moved).

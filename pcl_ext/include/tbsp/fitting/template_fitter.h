@@ -149,7 +149,8 @@ struct FitParameters {
   /// other has more than 10 and 1 % fewer: where the data cannot tell, the template's own shape
   /// in holes is kept; FitReport::coarse_compared). With detail_rounds the choice is made before
   /// them and only the kept fit runs them. Where the fit without the coarse stage leaves 10 points
-  /// or fewer beyond r_max the other is stopped; otherwise the comparison costs the slower fit's
+  /// or fewer beyond r_max that are not isolated (at least 4 other points within 3 × the cloud's
+  /// median spacing: stray outliers do not count) the other is stopped; otherwise the comparison costs the slower fit's
   /// time (measured 1.6-3.6 × one fit without the coarse stage on two cores, docs/fitting.md) and
   /// about twice one fit's peak memory.
   /// 400 is the measured setting. −1, 0 (off) or 4..20000.
@@ -301,8 +302,8 @@ struct FitReport {
   /// (FitParameters::coarse_nodes); coarse_far_points: the ROI points farther than r_max from
   /// each (without, with) where the choice was made (after the pull rounds, or before the detail
   /// rounds). Kept: coarse_nodes is 400 when the coarse stage's fit was. When the fit without it
-  /// leaves 10 points or fewer there, the other cannot be kept and is stopped (not compared;
-  /// coarse_far_points holds the one count).
+  /// leaves 10 points or fewer there that are not isolated (stray outliers left out), the other is
+  /// stopped (not compared; coarse_far_points holds that one count).
   bool coarse_compared = false;
   std::vector<Eigen::Index> coarse_far_points;
   /// without markers, with the coarse stage: hypotheses fitted (1 + the usable entries of
