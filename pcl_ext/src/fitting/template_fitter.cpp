@@ -57,6 +57,8 @@ public:
   /// only those that are not isolated (fit_impl::is_surface_point).
   Eigen::Index pointsBeyondMatchDistance(bool surface_only = false) const;
   FitReport finish(TriMesh& result, std::vector<VertexStatus>& status);
+  /// Nodes of the coarse stage's graph (0: none ran; at most the template's vertices).
+  int coarseNodes() const { return rep_.coarse_nodes; }
 
 private:
   Clock::time_point t_all_;
@@ -268,14 +270,14 @@ FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::M
   if (skipped)
     std::snprintf(buf, sizeof buf,
                   "%lld of the ROI points that are not isolated lie beyond r_max from the fit without the coarse stage%s: the fit "
-                  "with it (400 nodes) was %s. ",
+                  "with it was %s. ",
                   static_cast<long long>(far[0]), after_pull ? " after the pull rounds" : " before the detail rounds",
                   side_by_side ? "stopped" : "not run");
   else
     std::snprintf(buf, sizeof buf,
-                  "fitted without and with the coarse stage (400 nodes)%s: %lld / %lld of the ROI points lie beyond r_max from the "
+                  "fitted without and with the coarse stage (%d nodes)%s: %lld / %lld of the ROI points lie beyond r_max from the "
                   "two fits%s; %s kept. ",
-                  side_by_side ? " side by side" : "", static_cast<long long>(far[0]), static_cast<long long>(far[1]),
+                  runs[1]->coarseNodes(), side_by_side ? " side by side" : "", static_cast<long long>(far[0]), static_cast<long long>(far[1]),
                   after_pull ? " after the pull rounds" : " before the detail rounds", kept ? "the coarse stage's fit" : "the fit without it");
   logger()->info("[TemplateFitting] {}", buf);
   rep.coarse_compared = !skipped;
