@@ -230,7 +230,7 @@ FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::M
       // the coarse stage's fit can only be kept with more than 10 points fewer (below), and
       // isolated points do not make it worth running: stray outliers lie far from any fit (a
       // bunny with 10 % of them: ~2,800 points beyond r_max from both fits)
-      if (h == 0) far_surface = far[0] > 10 ? runs[0]->pointsBeyondMatchDistance(true) : far[0];
+      if (h == 0) far_surface = runs[0]->pointsBeyondMatchDistance(true);  // (a k-d tree query per far point)
       if (h == 0 && far_surface <= 10) skip = true;
     } catch (...) {
       errors[std::size_t(h)] = std::current_exception();

@@ -150,9 +150,9 @@ struct FitParameters {
   /// in holes is kept; FitReport::coarse_compared). With detail_rounds the choice is made before
   /// them and only the kept fit runs them. Where the fit without the coarse stage leaves 10 points
   /// or fewer beyond r_max that are not isolated (at least 4 other points within 3 × the cloud's
-  /// median spacing: stray outliers do not count) the other is stopped; otherwise the comparison costs the slower fit's
-  /// time (measured 1.6-3.6 × one fit without the coarse stage on two cores, docs/fitting.md) and
-  /// about twice one fit's peak memory.
+  /// median spacing: stray outliers do not count) the other is stopped; otherwise the comparison
+  /// costs the slower fit's time (measured 1.6-3.6 × one fit without the coarse stage on two
+  /// cores, docs/fitting.md) and about twice one fit's peak memory.
   /// 400 is the measured setting. −1, 0 (off) or 4..20000.
   int coarse_nodes = -1;
   /// Without markers (the auto_markers flow) and with the coarse stage on: one more hypothesis
