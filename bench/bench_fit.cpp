@@ -145,6 +145,7 @@ int main(int argc, char** argv) {
     else if (a == "--propagation-weight" && i + 1 < argc) base.propagation_weight = std::atof(argv[++i]);
     else if (a == "--rim-rejection" && i + 1 < argc) base.rim_rejection = std::atof(argv[++i]);
     else if (a == "--refine-rotations") base.refine_rotations = true;
+    else if (a == "--no-rotation-field") base.rotation_field = false;
     else if (a == "--detail-rounds" && i + 1 < argc) base.detail_rounds = std::atoi(argv[++i]);
     else if (a == "--pull-rounds" && i + 1 < argc) base.pull_rounds = std::atoi(argv[++i]);
     else if (a == "--detail-no-pull") base.detail_pull_unexplained = false;
@@ -173,7 +174,7 @@ int main(int argc, char** argv) {
     }
     else {
       std::fprintf(stderr, "usage: bench_fit [-v|--verbose] [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N] "
-                           "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--detail-rounds N] [--pull-rounds N] [--detail-no-pull] [--max-iterations N] "
+                           "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--no-rotation-field] [--detail-rounds N] [--pull-rounds N] [--detail-no-pull] [--max-iterations N] "
                            "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--hole-axis 0|1|2] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
                            "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W] [--coarse-prepass N[,N...]]\n");
       return 2;
