@@ -116,12 +116,6 @@ const RoiDistances& roi_distances(FitState& s) {
   return r;
 }
 
-std::vector<FitReport::UnexplainedRegion> unexplained_regions(FitState& s) {
-  const RoiDistances& r = roi_distances(s);
-  if (r.Q.rows() == 0) return {};
-  return unexplained_regions(r.Q, r.d, s.cloud.diag, s.u.max_match_distance);
-}
-
 void compute_metrics(FitState& s, int known_crossings) {
   FitReport& rep = s.rep;
   const FitParameters& u = s.u;
