@@ -98,7 +98,8 @@ TEST(CoarseCompare, StrayOutliersDoNotStartTheCoarseFit) {
 // The SMPL human with arms, head and a knee turned by 45°: no region of the scan is unexplained
 // (a hand's points are too few), but 313 points lie beyond r_max from the fit without the coarse
 // stage and 82 from the fit with it, which is kept: clean Hausdorff 1.55 → 0.64 % (measured). The
-// same fit on one thread as on two, and a cancel from the caller is a Cancelled, not a fit.
+// same fit on one thread as on two and as a fit with the coarse stage alone, and a cancel from
+// the caller is a Cancelled, not a fit.
 TEST(CoarseCompare, TheTurnedHumansHandsComeBackWithTheCoarseStage) {
   TBSP_REQUIRE_FILE(test::shared(kCmpHuman));
   const synth::Scenario s = cmp_articulated(kCmpHuman, synth::human_limbs(45), 1);
@@ -131,6 +132,13 @@ TEST(CoarseCompare, TheTurnedHumansHandsComeBackWithTheCoarseStage) {
   cmp_fit(s, FitParameters{}, b);
   omp_set_num_threads(threads);
   EXPECT_TRUE(a.V == b.V) << "largest difference " << (a.V - b.V).cwiseAbs().maxCoeff();
+  // the coarse stage's fit branches off the other after the initial pose: the same fit as one
+  // that runs the coarse stage alone
+  FitParameters coarse;
+  coarse.coarse_nodes = 400;
+  TriMesh alone;
+  cmp_fit(s, coarse, alone);
+  EXPECT_TRUE(a.V == alone.V) << "largest difference " << (a.V - alone.V).cwiseAbs().maxCoeff();
   int calls = 0;
   TriMesh cancelled;
   EXPECT_THROW(cmp_fit(s, FitParameters{}, cancelled, [&](double, const std::string&) { return ++calls < 8; }), Cancelled);

@@ -66,6 +66,16 @@ struct FitState {
   FitState(const TriMesh& t, const std::vector<FitMarker>& m, const ProgressCallback& p, FitReport& r,
            std::vector<VertexStatus>& st, const PreparedCloud& c)
       : markers(m), progress(p), rep(r), status(st), u(r.used), cloud(c), N(c.N), templ_(&t) {}
+  /// A second fit continuing from `o`'s state (the same template, markers and cloud), reporting
+  /// to `r` / `st` (copies of o's report and status) and `p`. Everything is copied except the
+  /// deformer: D starts empty, so the next stage must set it up (coarse_stage does: its mesh,
+  /// scale and rotations; iterate_fit its constraints).
+  FitState(const FitState& o, const ProgressCallback& p, FitReport& r, std::vector<VertexStatus>& st)
+      : markers(o.markers), progress(p), rep(r), status(st), u(r.used), cloud(o.cloud), N(o.N), orient(o.orient),
+        cos_max(o.cos_max), mtarget(o.mtarget), mverts(o.mverts), masked(o.masked), V(o.V), V0(o.V0), F(o.F),
+        matched(o.matched), target(o.target), prop_ids(o.prop_ids), propagation_handled(o.propagation_handled),
+        coarse(o.coarse), roi_dist(o.roi_dist), coarse_prepass(o.coarse_prepass), alignment_cache(o.alignment_cache),
+        templ_(o.templ_), NC_(o.NC_), nc_ready_(o.nc_ready_) {}
 
   const std::vector<FitMarker>& markers;
   const ProgressCallback& progress;

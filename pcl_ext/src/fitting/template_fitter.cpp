@@ -10,6 +10,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <system_error>
 #include <thread>
@@ -38,19 +39,26 @@ struct SharedWork {
   std::optional<SimilarityIcpResult> alignment;
 };
 
-// One fit in two parts: the constructor runs it up to the detail rounds (alignment, initial pose,
-// coarse stage, iterations, propagation), finish() does the rest (detail rounds, repair, metrics).
-// In between pointsBeyondMatchDistance() tells how much of the cloud the fit so far leaves
-// unexplained, so a fit with markers can compare its fits without and with the coarse stage
-// before it spends the detail rounds on one of them.
+// One fit in parts: the constructor runs it up to the coarse stage (alignment, initial pose and
+// scale), fitStages() on to the detail rounds (coarse stage, iterations, propagation), finish()
+// does the rest (detail rounds, repair, metrics). After the constructor a second fit can branch
+// off (the fork constructor: the fits with and without the coarse stage share what comes before
+// it); after fitStages() pointsBeyondMatchDistance() tells how much of the cloud the fit so far
+// leaves unexplained, so a fit with markers can compare its fits without and with the coarse
+// stage before it spends the detail rounds on one of them.
 // Holds references to the template, markers and (shared) cloud: they must outlive it.
 class FitRun {
 public:
   FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const std::vector<FitMarker>& markers,
          const RegionOfInterest& roi, const FitParameters& params, ProgressCallback progress, bool orient_normals, int coarse_prepass,
          SharedWork* shared = nullptr);
+  /// A second fit from `from`'s state after its constructor (before fitStages), with
+  /// `coarse_nodes` instead of from's (the only parameter the stages before it do not read).
+  FitRun(const FitRun& from, int coarse_nodes, ProgressCallback progress);
   FitRun(const FitRun&) = delete;
   FitRun& operator=(const FitRun&) = delete;
+  /// The coarse stage, iterations and propagation (once; pull and finish run them if this did not).
+  void fitStages();
   /// The detail and pull rounds (once; finish runs them if this did not).
   void pull();
   /// ROI points farther than max_match_distance from the current shape; with `surface_only`
@@ -69,7 +77,7 @@ private:
   std::vector<VertexStatus> status_;
   TriMesh aligned_;
   std::unique_ptr<fit_impl::FitState> s_;
-  bool pulled_ = false;
+  bool staged_ = false, pulled_ = false;
 };
 
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
@@ -175,8 +183,8 @@ int omp_thread_budget() {
 
 // With markers and coarse_nodes −1: the fit runs twice, without the coarse stage and with it
 // (400 nodes), side by side on two threads when OpenMP allows more than one (each fit's OpenMP
-// loops on its share; a fit's result does not depend on the thread count, so neither does the
-// choice). Both run their pull rounds (with detail rounds: the choice is made before them and
+// loops on its share, and on all of them once the other fit is done; a fit's result does not
+// depend on the thread count, so neither does the choice). Both run their pull rounds (with detail rounds: the choice is made before them and
 // only the kept fit runs them); kept: the fit from which fewer ROI points lie farther than
 // r_max, the fit without the coarse stage unless the other has more than 10 points and 1 %
 // fewer (the same points for both, outliers included, so the difference is the data one fit
@@ -192,8 +200,7 @@ FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::M
   const ScopedBlasThreads blas_threads(1);  // before the workers: their own scopes then keep 1
   SharedWork shared;
   shared.cloud = fit_impl::prepare_cloud(P_in, N_in, roi, params.normal_neighbours);
-  FitParameters with_coarse = params;
-  with_coarse.coarse_nodes = 400;
+  const int coarse_nodes = 400;  // the measured setting (docs/fitting.md)
   const bool after_pull = params.detail_rounds == 0;
   std::unique_ptr<FitRun> runs[2];
   Eigen::Index far[2] = {0, 0}, far_surface = 0;
@@ -202,9 +209,19 @@ FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::M
   std::mutex m;
   // stop: both fits (the caller asked to, or one failed); skip: the coarse stage's fit is not needed
   std::atomic<bool> stop{false}, skip{false}, caller_stop{false};
+  // done: one fit has run its part; the other's next stage takes the whole thread budget
+  std::atomic<bool> done{false};
+  bool finished[2] = {false, false};  // fit h ran its part (each written by its own thread only)
+  const int budget = omp_thread_budget();
+  const int omp_each = std::max(1, budget / 2);
   // one bar: the mean of the two fits' fractions, never backwards
   auto progress_of = [&](int h) -> ProgressCallback {
     return [&, h](double f, const std::string& stage) {
+#ifdef _OPENMP
+      // (called by the fit's own thread between its parallel loops; the thread count does not
+      // change a fit's result)
+      if (budget >= 2 && done.load() && !omp_in_parallel()) omp_set_num_threads(budget);
+#endif
       if (stop.load() || (h == 1 && skip.load())) return false;
       if (!progress) return true;
       std::lock_guard<std::mutex> lock(m);
@@ -215,16 +232,13 @@ FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::M
       return false;
     };
   };
-  const int budget = omp_thread_budget();
-  const int omp_each = std::max(1, budget / 2);
   auto work = [&](int h) {
 #ifdef _OPENMP
     if (budget >= 2) omp_set_num_threads(omp_each);  // this thread's OpenMP regions only
 #endif
     try {
       if (stop.load()) return;
-      runs[h] = std::make_unique<FitRun>(templ, P_in, N_in, markers, roi, h ? with_coarse : params, progress_of(h), orient_normals, 0,
-                                         &shared);
+      runs[h]->fitStages();
       if (after_pull) runs[h]->pull();
       far[h] = runs[h]->pointsBeyondMatchDistance();
       // the coarse stage's fit can only be kept with more than 10 points fewer (below), and
@@ -232,11 +246,18 @@ FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::M
       // bunny with 10 % of them: ~2,800 points beyond r_max from both fits)
       if (h == 0) far_surface = runs[0]->pointsBeyondMatchDistance(true);  // (a k-d tree query per far point)
       if (h == 0 && far_surface <= 10) skip = true;
+      finished[h] = true;
+      done = true;
     } catch (...) {
       errors[std::size_t(h)] = std::current_exception();
       if (!(h == 1 && skip.load())) stop = true;
     }
   };
+  // what comes before the coarse stage (the initial pose and scale) is the same for both fits:
+  // run once, on every thread, and the coarse stage's fit branches off from it
+  runs[0] = std::make_unique<FitRun>(templ, P_in, N_in, markers, roi, params, progress_of(0), orient_normals, 0, &shared);
+  runs[1] = std::make_unique<FitRun>(*runs[0], coarse_nodes, progress_of(1));
+  fraction[1] = fraction[0];
   bool side_by_side = false;
   {
 #ifdef _OPENMP
@@ -257,7 +278,7 @@ FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::M
     omp_set_num_threads(own);
 #endif
   }
-  const bool skipped = skip.load() && !(runs[1] && errors[1] == nullptr);  // (it may have finished first)
+  const bool skipped = skip.load() && !finished[1];  // (it may have finished first)
   if (skipped) far[0] = far_surface;
   if (skipped && !caller_stop.load()) errors[1] = nullptr;  // stopped here, not by the caller
   if (const std::exception_ptr e = first_real_error(errors)) std::rethrow_exception(e);
@@ -518,13 +539,29 @@ FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::
   }
   fit_impl::initial_pose(s);  // stage 1 (+ global scale)
   fit_impl::orient_cloud_normals(s);
+}
+
+FitRun::FitRun(const FitRun& from, int coarse_nodes, ProgressCallback progress)
+    : t_all_(from.t_all_), blas_threads_(1), progress_(std::move(progress)), rep_(from.rep_), status_(from.status_),
+      aligned_(from.aligned_) {
+  if (from.staged_) throw std::logic_error("FitRun: a fit branches off before its stages");
+  s_ = std::make_unique<fit_impl::FitState>(*from.s_, progress_, rep_, status_);
+  if (&from.s_->templ() == &from.aligned_) s_->useTemplate(aligned_);
+  rep_.used.coarse_nodes = coarse_nodes;
+}
+
+void FitRun::fitStages() {
+  if (staged_) return;
+  fit_impl::FitState& s = *s_;
   fit_impl::coarse_stage(s);
   fit_impl::iterate_fit(s);              // stage 2
   fit_impl::propagate_displacements(s);  // stage 3
+  staged_ = true;
 }
 
 void FitRun::pull() {
   if (pulled_) return;
+  fitStages();
   fit_impl::detail_rounds(*s_);
   fit_impl::pull_rounds(*s_);
   pulled_ = true;
