@@ -338,3 +338,41 @@ TEST(TemplateFittingBadInput, AFitThatMatchesNoVertexIsAnErrorAndAWildAlignmentA
   EXPECT_GT(big.alignment_scale, 2.0);  // the ellipsoid (1.5 x 1 x 0.8) against the unit sphere: ~3.5
   EXPECT_NE(big.message.find("warning: the alignment turned the template by"), std::string::npos) << big.message;
 }
+
+// Detail rounds report progress once per round (stage "detail rounds", rising fractions after
+// 0.9 of the fit; this fit without markers maps its second pass to 0.4 … 1), so a long
+// accuracy-setting fit shows progress there and can be cancelled between rounds.
+TEST(TemplateFitting, DetailRoundsReportProgressAndCanBeCancelledBetweenThem) {
+  Eigen::MatrixX3d P, N;
+  ellipsoid_matrices(2000, P, N);
+  TriMesh t = make_icosphere(3, 1.0);
+  t.V = (t.V * Eigen::AngleAxisd(6 * M_PI / 180, Eigen::Vector3d(1, 2, 0).normalized()).toRotationMatrix().transpose()).eval();
+  FitParameters p;
+  p.coarse_nodes = 0;
+  p.coarse_prepass_nodes = {};
+  p.max_iterations = 5;
+  p.detail_rounds = 3;
+  p.detail_iterations = 3;
+  std::vector<double> detail;
+  std::vector<VertexStatus> st;
+  TriMesh out;
+  fit_template(t, P, N, {}, RegionOfInterest{}, p, out, st, [&](double f, const std::string& stage) {
+    if (stage == "detail rounds") detail.push_back(f);
+    return true;
+  });
+  ASSERT_EQ(detail.size(), 3u);
+  for (std::size_t i = 0; i < detail.size(); ++i) {
+    EXPECT_GE(detail[i], 0.9);
+    EXPECT_LT(detail[i], 1.0);
+    if (i > 0) {
+      EXPECT_GT(detail[i], detail[i - 1]);
+    }
+  }
+  TriMesh kept = out;
+  int seen = 0;
+  EXPECT_THROW(fit_template(t, P, N, {}, RegionOfInterest{}, p, kept, st,
+                            [&](double, const std::string& stage) { return !(stage == "detail rounds" && ++seen == 2); }),
+               Cancelled);
+  EXPECT_EQ(seen, 2);
+  EXPECT_EQ((kept.V - out.V).cwiseAbs().maxCoeff(), 0.0);
+}

@@ -129,7 +129,7 @@ static void run_rounds(FitState& s, int rounds, bool local) {
   const Eigen::Index np = s.cloud.np;
   const double cos_max = s.cos_max;
   const auto t0 = Clock::now();
-  report_progress(s.progress, 0.9, "detail rounds");
+  const char* stage = local ? "pull rounds" : "detail rounds";
   const double r = u.max_match_distance;
   const double rd = u.detail_radius_factor * r;  // kernel radius of the residual matching
   const double cos_detail = std::cos(u.detail_normal_angle_deg * M_PI / 180.0);
@@ -147,6 +147,9 @@ static void run_rounds(FitState& s, int rounds, bool local) {
   std::vector<double> pulled_cap(local ? nq : 0, 0.0);  // per ROI point
   std::vector<char> pulled_near(local ? std::size_t(V.rows()) : 0, 0);
   for (int round = 0; round < rounds; ++round) {
+    // (each round a point to cancel at; the compared fits also hand a finished fit's threads
+    // over here)
+    report_progress(s.progress, 0.9 + 0.05 * double(round) / rounds, stage);
     const auto t_round = Clock::now();
     // residual matching: every ROI point's closest point on the fit, as a face and barycentric
     // weights, found at the start of the round and then updated among the faces around the
