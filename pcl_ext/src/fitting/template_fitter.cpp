@@ -54,6 +54,7 @@ public:
          SharedWork* shared = nullptr);
   /// A second fit from `from`'s state after its constructor (before fitStages), with
   /// `coarse_nodes` instead of from's (the only parameter the stages before it do not read).
+  /// It reads from's cloud when that is not shared: `from` must then outlive it.
   FitRun(const FitRun& from, int coarse_nodes, ProgressCallback progress);
   FitRun(const FitRun&) = delete;
   FitRun& operator=(const FitRun&) = delete;
@@ -182,15 +183,16 @@ int omp_thread_budget() {
 }
 
 // With markers and coarse_nodes −1: the fit runs twice, without the coarse stage and with it
-// (400 nodes), side by side on two threads when OpenMP allows more than one (each fit's OpenMP
-// loops on its share, and on all of them once the other fit is done; a fit's result does not
-// depend on the thread count, so neither does the choice). Both run their pull rounds (with detail rounds: the choice is made before them and
-// only the kept fit runs them); kept: the fit from which fewer ROI points lie farther than
-// r_max, the fit without the coarse stage unless the other has more than 10 points and 1 %
-// fewer (the same points for both, outliers included, so the difference is the data one fit
-// explains and the other does not; the margin keeps near-equal fits from flipping on rounding,
-// and where the data cannot tell, the template's own shape in holes is kept rather than the
-// graph's).
+// (400 nodes). Both share the initial pose and scale (computed once, on every thread), then run
+// side by side on two threads when OpenMP allows more than one (each fit's OpenMP loops on its
+// share, and on all of them once the other fit is done; a fit's result does not depend on the
+// thread count, so neither does the choice). Both run their pull rounds (with detail rounds: the
+// choice is made before them and only the kept fit runs them); kept: the fit from which fewer
+// ROI points lie farther than r_max, the fit without the coarse stage unless the other has more
+// than 10 points and 1 % fewer (the same points for both, outliers included, so the difference
+// is the data one fit explains and the other does not; the margin keeps near-equal fits from
+// flipping on rounding, and where the data cannot tell, the template's own shape in holes is
+// kept rather than the graph's).
 FitReport fit_with_and_without_coarse_stage(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                                             const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                                             TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
