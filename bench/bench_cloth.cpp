@@ -117,12 +117,14 @@ Row run(const Skirt& s, const PbdSettings& st, int frames, int threads) {
 int main(int argc, char** argv) {
   int frames = 200, rings = 50, segments = 100, only_threads = 0;
   std::string only;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--frames")) frames = std::atoi(argv[i + 1]);
-    else if (!std::strcmp(argv[i], "--rings")) rings = std::atoi(argv[i + 1]);
-    else if (!std::strcmp(argv[i], "--segments")) segments = std::atoi(argv[i + 1]);
-    else if (!std::strcmp(argv[i], "--only")) only = argv[i + 1];
-    else if (!std::strcmp(argv[i], "--threads")) only_threads = std::atoi(argv[i + 1]);
+  // every flag takes a value; anything else (--help, a flag without its value) prints the usage
+  for (int i = 1; i < argc; i += 2) {
+    const bool has_value = i + 1 < argc;
+    if (has_value && !std::strcmp(argv[i], "--frames")) frames = std::atoi(argv[i + 1]);
+    else if (has_value && !std::strcmp(argv[i], "--rings")) rings = std::atoi(argv[i + 1]);
+    else if (has_value && !std::strcmp(argv[i], "--segments")) segments = std::atoi(argv[i + 1]);
+    else if (has_value && !std::strcmp(argv[i], "--only")) only = argv[i + 1];
+    else if (has_value && !std::strcmp(argv[i], "--threads")) only_threads = std::atoi(argv[i + 1]);
     else {
       std::fprintf(stderr, "usage: bench_cloth [--frames N] [--rings R] [--segments S] [--only WORD] [--threads N]\n");
       return 2;
