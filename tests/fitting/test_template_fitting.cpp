@@ -50,6 +50,14 @@ void ellipsoid_matrices(int n, Eigen::MatrixX3d& P, Eigen::MatrixX3d& N) {
   }
 }
 
+// A 642-vertex icosphere turned by 6° about (1, 2, 0): a template roughly in place on the
+// ellipsoid cloud, for fits without markers.
+TriMesh turned_icosphere() {
+  TriMesh t = make_icosphere(3, 1.0);
+  t.V = (t.V * Eigen::AngleAxisd(6 * M_PI / 180, Eigen::Vector3d(1, 2, 0).normalized()).toRotationMatrix().transpose()).eval();
+  return t;
+}
+
 std::vector<FitMarker> axis_markers(const TriMesh& t, const pcl::PointCloud<pcl::PointXYZ>& xyz) {
   std::vector<FitMarker> m;
   for (int d = 0; d < 3; ++d)
@@ -244,8 +252,7 @@ TEST(BsplineWeight, IsTheC1QuadraticKernel) {
 TEST(TemplateFitting, HypothesesSideBySideGiveTheFitOfOneThread) {
   Eigen::MatrixX3d P, N;
   ellipsoid_matrices(2000, P, N);
-  TriMesh t = make_icosphere(3, 1.0);  // 642 vertices, roughly in place: turned by 6°, 3 % off
-  t.V = (t.V * Eigen::AngleAxisd(6 * M_PI / 180, Eigen::Vector3d(1, 2, 0).normalized()).toRotationMatrix().transpose()).eval();
+  TriMesh t = turned_icosphere();  // and 3 % off
   t.V.rowwise() += Eigen::RowVector3d(0.03, -0.02, 0.0);
   FitParameters p;
   p.coarse_nodes = 80;
@@ -345,8 +352,7 @@ TEST(TemplateFittingBadInput, AFitThatMatchesNoVertexIsAnErrorAndAWildAlignmentA
 TEST(TemplateFitting, DetailRoundsReportProgressAndCanBeCancelledBetweenThem) {
   Eigen::MatrixX3d P, N;
   ellipsoid_matrices(2000, P, N);
-  TriMesh t = make_icosphere(3, 1.0);
-  t.V = (t.V * Eigen::AngleAxisd(6 * M_PI / 180, Eigen::Vector3d(1, 2, 0).normalized()).toRotationMatrix().transpose()).eval();
+  const TriMesh t = turned_icosphere();
   FitParameters p;
   p.coarse_nodes = 0;
   p.coarse_prepass_nodes = {};
