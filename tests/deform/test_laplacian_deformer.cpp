@@ -125,6 +125,33 @@ TEST(LaplacianDeformer, ResolveWithMovedTargetsEqualsFreshSolve) {
   EXPECT_TRUE(a.report().refactorized);
 }
 
+// a deformer of another rest shape on the same connectivity solves with a copied analysis to
+// the same bits as with its own
+TEST(LaplacianDeformer, CopiedSolverAnalysisGivesTheSameDeformation) {
+  const TriMesh m = make_tube(30, 12, 1.0, 0.1);
+  TriMesh bent = m;
+  for (Eigen::Index i = 0; i < bent.V.rows(); ++i) bent.V(i, 1) += 0.2 * bent.V(i, 0) * bent.V(i, 0);
+  const std::vector<int> handles = farthest_points(m.V, 8);
+  auto setup = [&](LaplacianDeformer& d, const TriMesh& rest) {
+    d.setMesh(rest);
+    for (std::size_t k = 0; k < handles.size(); ++k)
+      d.addPositionConstraint(SurfacePoint::atVertex(handles[k]), m.V.row(handles[k]).transpose() + Eigen::Vector3d(0, 0.1 * double(k), 0));
+  };
+  LaplacianDeformer a, own, copied;
+  setup(a, m);
+  a.deform();
+  setup(own, bent);
+  setup(copied, bent);
+  copied.copySolverAnalysis(a);
+  const Eigen::MatrixX3d X_own = own.deform(), X_copied = copied.deform();
+  EXPECT_TRUE(copied.report().refactorized);
+  EXPECT_EQ(X_own, X_copied);  // bit for bit
+  EXPECT_GT((X_own - a.deform()).norm(), 1e-3);  // another rest shape: another deformation
+  copied.addHardConstraint(handles[0], m.V.row(handles[0]).transpose());  // another pattern: analysed anew
+  own.addHardConstraint(handles[0], m.V.row(handles[0]).transpose());
+  EXPECT_EQ(own.deform(), copied.deform());
+}
+
 TEST(LaplacianDeformer, ScaledDifferentialCoordinatesScaleTheShape) {
   const TriMesh m = make_icosphere(3);
   LaplacianDeformer d;

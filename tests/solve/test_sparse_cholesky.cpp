@@ -47,6 +47,38 @@ TEST_P(SparseCholeskyBackends, SingularSystemIsANumericalFailure) {
   EXPECT_THROW(s.compute(Eigen::SparseMatrix<double>(3, 4)), InvalidInput);
 }
 
+// a copied analysis is used for a matrix of its pattern (no analysis of its own, the same bits
+// as a solver that analysed it) and ignored for another pattern
+TEST_P(SparseCholeskyBackends, CopiedAnalysisGivesTheSameFactorsAndOnlyForItsPattern) {
+  const bool cholmod = GetParam() == SparseCholesky::Backend::Cholmod;
+  if (cholmod && !SparseCholesky::cholmodAvailable()) GTEST_SKIP();
+  const Eigen::SparseMatrix<double> A = spd_system(0.1), A2 = spd_system(0.3);
+  Eigen::SparseMatrix<double> other = spd_system(0.1);
+  other.coeffRef(0, 5) += 1e-3;
+  other.coeffRef(5, 0) += 1e-3;
+  SparseCholesky first(GetParam()), fresh(GetParam()), copied(GetParam());
+  first.compute(A);
+  fresh.compute(A2);
+  copied.compute(other);  // its own analysis (another pattern) and factorization give way to the copy
+  copied.copyAnalysis(first);
+  EXPECT_EQ(copied.isFactorized(), !cholmod);  // SimplicialLDLT cannot be copied: left as it was
+  copied.compute(A2);
+  EXPECT_EQ(copied.numAnalyses(), cholmod ? 1 : 2);  // CHOLMOD: the copy's pattern, no analysis of its own
+  const Eigen::MatrixXd B = Eigen::MatrixXd::Random(A.rows(), 3);
+  EXPECT_EQ(fresh.solve(B), copied.solve(B));  // bit for bit
+  SparseCholesky reuse(GetParam());
+  reuse.copyAnalysis(first);
+  reuse.compute(other);  // another pattern than the copy's: analysed anew, still exact
+  EXPECT_EQ(reuse.numAnalyses(), 1);
+  const Eigen::MatrixXd Xo = reuse.solve(B), Xd = Eigen::MatrixXd(other).ldlt().solve(B);
+  EXPECT_LT((Xo - Xd).norm() / Xd.norm(), 1e-10);
+  SparseCholesky nothing(GetParam());
+  reuse.copyAnalysis(nothing);  // no analysis to copy, or itself: unchanged
+  reuse.copyAnalysis(reuse);
+  EXPECT_TRUE(reuse.isFactorized());
+  EXPECT_EQ(reuse.solve(B), Xo);
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, SparseCholeskyBackends,
                          ::testing::Values(SparseCholesky::Backend::Cholmod, SparseCholesky::Backend::EigenLDLT));
 

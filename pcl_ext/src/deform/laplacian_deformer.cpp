@@ -501,6 +501,13 @@ void LaplacianDeformer::buildSystem() {
   factorize(N);
 }
 
+void LaplacianDeformer::copySolverAnalysis(const LaplacianDeformer& other) {
+  if (this == &other) return;
+  cache_->solver.copyAnalysis(other.cache_->solver);
+  cache_->matrix_valid = false;
+  cache_->rhs_base_valid = false;
+}
+
 const ConstraintGraph* LaplacianDeformer::rotationGraph() const {
   return cache_->graph_valid ? &cache_->graph : nullptr;
 }

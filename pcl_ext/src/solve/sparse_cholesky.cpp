@@ -53,6 +53,20 @@ namespace {
 class CholmodLLT : public Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>> {
 public:
   const cholmod_factor* factor() const { return m_cholmodFactor; }
+  /// Takes a copy of `from`'s factor (symbolic or numeric) as this solver's analysis, as
+  /// analyzePattern() leaves it: the next factorize() refactorizes it in place.
+  bool copyAnalysis(const CholmodLLT& from) {
+    if (!from.m_cholmodFactor || !from.m_analysisIsOk) return false;
+    cholmod_factor* copy = cholmod_copy_factor(from.m_cholmodFactor, &cholmod());
+    if (!copy) return false;  // out of memory: the next compute() analyses as usual
+    if (m_cholmodFactor) cholmod_free_factor(&m_cholmodFactor, &cholmod());
+    m_cholmodFactor = copy;
+    this->m_isInitialized = true;
+    this->m_info = Eigen::Success;
+    m_analysisIsOk = true;
+    m_factorizationIsOk = false;
+    return true;
+  }
 };
 
 // The view of a supernodal LLᵀ factor with int indices and real values, or an empty one
@@ -88,6 +102,7 @@ struct SparseCholesky::Impl {
   bool cholmod_solve = false;
   Eigen::Index n = 0;
   std::vector<int> outer, inner;  // pattern of the last analysed matrix
+  bool analysed = false;          // an analysis of that pattern is held (own or copied)
   int analyses = 0, factorizations = 0;
 };
 
@@ -132,7 +147,7 @@ void SparseCholesky::compute(const Eigen::SparseMatrix<double>& A_in) {
   Impl& m = *impl_;
   m.factorized = false;
   const bool same_pattern =
-      m.analyses > 0 && m.n == A.rows() && m.outer.size() == std::size_t(A.outerSize() + 1) &&
+      m.analysed && m.n == A.rows() && m.outer.size() == std::size_t(A.outerSize() + 1) &&
       std::equal(m.outer.begin(), m.outer.end(), A.outerIndexPtr()) && m.inner.size() == std::size_t(A.nonZeros()) &&
       std::equal(m.inner.begin(), m.inner.end(), A.innerIndexPtr());
   bool ok = false;
@@ -155,6 +170,7 @@ void SparseCholesky::compute(const Eigen::SparseMatrix<double>& A_in) {
     m.outer.assign(A.outerIndexPtr(), A.outerIndexPtr() + A.outerSize() + 1);
     m.inner.assign(A.innerIndexPtr(), A.innerIndexPtr() + A.nonZeros());
   }
+  m.analysed = true;
   m.n = A.rows();
   ++m.factorizations;
   if (!ok)
@@ -162,6 +178,26 @@ void SparseCholesky::compute(const Eigen::SparseMatrix<double>& A_in) {
                            std::to_string(A.rows()) + " system is not positive definite (" + backendName() +
                            "): the problem is under-constrained; add constraints so every part is pinned down");
   m.factorized = true;
+}
+
+void SparseCholesky::copyAnalysis(const SparseCholesky& other) {
+  if (this == &other) return;
+  const Impl& o = *other.impl_;
+  Impl& m = *impl_;
+  if (!o.analysed || o.backend != m.backend) return;
+#ifdef TBSP_HAVE_CHOLMOD
+  if (m.backend == Backend::Cholmod) {
+    if (!m.cholmod.copyAnalysis(o.cholmod)) return;
+    m.view = detail::SupernodalFactorView{};
+    m.plan = detail::SupernodalPlan{};
+  }
+#endif
+  if (m.backend == Backend::EigenLDLT) return;  // SimplicialLDLT cannot be copied: analyse anew
+  m.factorized = false;
+  m.outer = o.outer;
+  m.inner = o.inner;
+  m.n = o.n;
+  m.analysed = true;
 }
 
 Eigen::MatrixXd SparseCholesky::solve(const Eigen::MatrixXd& B) const {

@@ -209,6 +209,14 @@ public:
   /// \throws InvalidInput when negative or not finite.
   void setSliverGuard(double guard);
 
+  /// \brief Takes over the symbolic analysis of `other`'s last factorization (see
+  /// SparseCholesky::copyAnalysis): when this deformer's next system has the same sparsity
+  /// pattern — the same mesh connectivity and the same hard-constrained vertices, e.g. a second
+  /// deformer of one template with another rest shape — only its numeric factorization runs.
+  /// The result is identical to analysing anew; any other pattern is analysed as usual.
+  /// Keeps this deformer's mesh, constraints and options; its cached factorization is dropped.
+  void copySolverAnalysis(const LaplacianDeformer& other);
+
   /// Progress callback (stages: laplacian, geodesics, factorize, rotations, solve).
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
 

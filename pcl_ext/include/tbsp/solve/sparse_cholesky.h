@@ -31,6 +31,16 @@ public:
   /// usually too few constraints), InvalidInput when A is not square.
   void compute(const Eigen::SparseMatrix<double>& A);
 
+  /// \brief Takes over `other`'s symbolic analysis (fill-reducing ordering, supernodes) and the
+  /// sparsity pattern it was made for, so that the next compute() of a matrix with that pattern
+  /// runs the numeric factorization only; a matrix with another pattern is analysed anew as
+  /// usual. The factors are identical to analysing anew (the analysis depends on the pattern
+  /// alone). For solvers of systems that share a mesh's connectivity (two fits of one
+  /// template): the ordering of a 43k-vertex Laplacian system costs ~0.15 s. Drops this
+  /// solver's own factorization; numAnalyses() is not changed. Copies O(nnz(L)) memory.
+  /// Nothing happens when `other` has no analysis or uses another backend.
+  void copyAnalysis(const SparseCholesky& other);
+
   /// \brief Solves A X = B for every column of B. \pre compute() succeeded.
   /// \throws NumericalFailure if nothing is factorized or the result is not finite.
   Eigen::MatrixXd solve(const Eigen::MatrixXd& B) const;
