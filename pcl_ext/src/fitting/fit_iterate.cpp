@@ -153,7 +153,7 @@ bool iterate_fit(FitState& s) {
   Eigen::MatrixX3d& V = s.V;
   s.matched.assign(std::size_t(V.rows()), 0);
   s.target = V;
-  const Eigen::SparseMatrix<double> Ct = cotangent_matrix(s.templ().V, s.templ().F);  // for refine_rotations
+  Eigen::SparseMatrix<double> Ct;  // for refine_rotations only (built on its first use)
   Iterations st;
   bool converged = false;
   const auto t_it = Clock::now();
@@ -194,7 +194,10 @@ bool iterate_fit(FitState& s) {
       s.D.setAnchor(1e-9);  // folded intermediate shapes must not make the system singular
       w_data = u.updating_match_weight;
     }
-    if (u.refine_rotations && !u.laplacian_updating && it >= 2) refine_rotation_field(s, Ct);
+    if (u.refine_rotations && !u.laplacian_updating && it >= 2) {
+      if (Ct.rows() == 0) Ct = cotangent_matrix(s.templ().V, s.templ().F);
+      refine_rotation_field(s, Ct);
+    }
     const bool freeze = u.freeze_constraints && it >= freeze_it && !u.laplacian_updating && !u.remeshing;
     set_constraints(s, st, freeze, w_data, match_scale);
     const Eigen::MatrixX3d Vn = s.D.deform();
