@@ -27,7 +27,10 @@ struct BinnedCloud {
   PointSearch search;
 };
 
-BinnedCloud bin_cloud(const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N, const std::vector<char>& use, double h) {
+// nullopt when the cloud needs more than max_bins bins (then matching against it would not pay:
+// the count is known before the sums and the search tree are built)
+std::optional<BinnedCloud> bin_cloud(const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N, const std::vector<char>& use, double h,
+                                     int max_bins) {
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300);
   for (Eigen::Index i = 0; i < P.rows(); ++i)
     if (use[std::size_t(i)]) lo = lo.cwiseMin(P.row(i).transpose());
@@ -42,7 +45,7 @@ BinnedCloud bin_cloud(const Eigen::MatrixX3d& P, const Eigen::MatrixX3d& N, cons
     const std::uint64_t key = (std::uint64_t(c.x()) & 0x1FFFFF) | ((std::uint64_t(c.y()) & 0x1FFFFF) << 21) |
                               ((std::uint64_t(c.z()) & 0x1FFFFF) << 42) | (oct << 61);
     const auto [it, fresh] = bin_of.emplace(key, nb);
-    if (fresh) ++nb;
+    if (fresh && ++nb > max_bins) return std::nullopt;
     bin[std::size_t(i)] = it->second;
   }
   BinnedCloud b;
@@ -136,10 +139,8 @@ bool match_vertices(FitState& s, double r, bool frozen_phase, const std::vector<
   // large radius: match against the binned cloud (bins of r/3) when it has under half as
   // many entries as the cloud (FitParameters::binned_matching)
   std::optional<BinnedCloud> binned;
-  if (u.binned_matching && !frozen_phase && !u.laplacian_updating && !u.remeshing && r > u.max_match_distance) {
-    BinnedCloud b = bin_cloud(P, N, roi_ok, r / 3);
-    if (2 * b.count.rows() < s.cloud.np) binned = std::move(b);
-  }
+  if (u.binned_matching && !frozen_phase && !u.laplacian_updating && !u.remeshing && r > u.max_match_distance)
+    binned = bin_cloud(P, N, roi_ok, r / 3, int((s.cloud.np - 1) / 2));  // 2 · bins < np
   auto& nb_cache = cache.nb;
   auto& nb_cache_at = cache.at;
   auto& nb_cache_r = cache.r;
