@@ -37,8 +37,10 @@ public:
   /// usual. The factors are identical to analysing anew (the analysis depends on the pattern
   /// alone). For solvers of systems that share a mesh's connectivity (two fits of one
   /// template): the ordering of a 43k-vertex Laplacian system costs ~0.15 s. Drops this
-  /// solver's own factorization; numAnalyses() is not changed. Copies O(nnz(L)) memory.
-  /// Nothing happens when `other` has no analysis or uses another backend.
+  /// solver's own factorization; numAnalyses() is not changed. Copies O(nnz(L)) memory; not
+  /// while `other` computes. Nothing happens when `other` has no analysis, uses another
+  /// backend, or the backend is Eigen's (its analysis cannot be copied: the next compute()
+  /// analyses as usual).
   void copyAnalysis(const SparseCholesky& other);
 
   /// \brief Solves A X = B for every column of B. \pre compute() succeeded.
