@@ -504,8 +504,7 @@ void LaplacianDeformer::buildSystem() {
 void LaplacianDeformer::copySolverAnalysis(const LaplacianDeformer& other) {
   if (this == &other) return;
   cache_->solver.copyAnalysis(other.cache_->solver);
-  cache_->matrix_valid = false;
-  cache_->rhs_base_valid = false;
+  cache_->matrix_valid = false;  // (the copy dropped the factorization; the rotation graph stays)
 }
 
 const ConstraintGraph* LaplacianDeformer::rotationGraph() const {

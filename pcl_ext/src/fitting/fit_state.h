@@ -69,13 +69,16 @@ struct FitState {
   /// A second fit continuing from `o`'s state (the same template, markers and cloud), reporting
   /// to `r` / `st` (copies of o's report and status) and `p`. Everything is copied except the
   /// deformer: D starts empty, so the next stage must set it up (coarse_stage does: its mesh,
-  /// scale and rotations; iterate_fit its constraints).
+  /// scale and rotations; iterate_fit its constraints); it takes o's solver analysis, which its
+  /// systems on the same connectivity reuse (~0.15 s on 43k vertices, same factors).
   FitState(const FitState& o, const ProgressCallback& p, FitReport& r, std::vector<VertexStatus>& st)
       : markers(o.markers), progress(p), rep(r), status(st), u(r.used), cloud(o.cloud), N(o.N), orient(o.orient),
         cos_max(o.cos_max), mtarget(o.mtarget), mverts(o.mverts), masked(o.masked), V(o.V), V0(o.V0), F(o.F),
         matched(o.matched), target(o.target), prop_ids(o.prop_ids), propagation_handled(o.propagation_handled),
         coarse(o.coarse), roi_dist(o.roi_dist), coarse_prepass(o.coarse_prepass), alignment_cache(o.alignment_cache),
-        templ_(o.templ_), NC_(o.NC_), nc_ready_(o.nc_ready_) {}
+        templ_(o.templ_), NC_(o.NC_), nc_ready_(o.nc_ready_) {
+    D.copySolverAnalysis(o.D);
+  }
 
   const std::vector<FitMarker>& markers;
   const ProgressCallback& progress;

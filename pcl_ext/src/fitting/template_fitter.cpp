@@ -548,10 +548,6 @@ FitRun::FitRun(const FitRun& from, int coarse_nodes, ProgressCallback progress)
       aligned_(from.aligned_) {
   if (from.staged_) throw std::logic_error("FitRun: a fit branches off before its stages");
   s_ = std::make_unique<fit_impl::FitState>(*from.s_, progress_, rep_, status_);
-  // the coarse stage gives this fit's deformer a new rest shape on the same connectivity: its
-  // systems have the pattern `from` analysed for the initial pose (same factors, ~0.15 s less
-  // on 43k vertices, on the path the two fits wait for)
-  s_->D.copySolverAnalysis(from.s_->D);
   if (&from.s_->templ() == &from.aligned_) s_->useTemplate(aligned_);
   rep_.used.coarse_nodes = coarse_nodes;
 }

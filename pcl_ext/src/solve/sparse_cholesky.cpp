@@ -181,23 +181,20 @@ void SparseCholesky::compute(const Eigen::SparseMatrix<double>& A_in) {
 }
 
 void SparseCholesky::copyAnalysis(const SparseCholesky& other) {
-  if (this == &other) return;
   const Impl& o = *other.impl_;
   Impl& m = *impl_;
-  if (!o.analysed || o.backend != m.backend) return;
+  // (SimplicialLDLT's analysis cannot be copied: the next compute() analyses anew)
+  if (this == &other || !o.analysed || o.backend != m.backend || m.backend != Backend::Cholmod) return;
 #ifdef TBSP_HAVE_CHOLMOD
-  if (m.backend == Backend::Cholmod) {
-    if (!m.cholmod.copyAnalysis(o.cholmod)) return;
-    m.view = detail::SupernodalFactorView{};
-    m.plan = detail::SupernodalPlan{};
-  }
-#endif
-  if (m.backend == Backend::EigenLDLT) return;  // SimplicialLDLT cannot be copied: analyse anew
+  if (!m.cholmod.copyAnalysis(o.cholmod)) return;
+  m.view = detail::SupernodalFactorView{};
+  m.plan = detail::SupernodalPlan{};
   m.factorized = false;
   m.outer = o.outer;
   m.inner = o.inner;
   m.n = o.n;
   m.analysed = true;
+#endif
 }
 
 Eigen::MatrixXd SparseCholesky::solve(const Eigen::MatrixXd& B) const {
