@@ -1,9 +1,12 @@
 // Template fitting (thesis ch. 5): results in the form of Table 5.1 and the speed benchmark
 // against PCL's Poisson reconstruction on the same cloud.
-//   ./build/bench/bench_fit [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N]
+//   ./build/bench/bench_fit [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N | --seeds A:B] [--markers N]
 //                           [--propagation-weight W] [--rim-rejection R]
 // (--only: run just the rows whose model name contains WORD, e.g. armadillo; --seed / --markers:
-// of the ground-truth scenarios (default 1 / 20); --propagation-weight, --rim-rejection: of every
+// of the ground-truth scenarios (default 1 / 20; --seeds A:B runs the articulated and GT rows for
+// every seed A..B and prints a summary line per row: clean Hausdorff range and mean, how many
+// within the bound, hole errors, median time, how often the coarse stage's fit was kept);
+// --propagation-weight, --rim-rejection: of every
 // fit (defaults ½, 0.5))
 //   --articulated DEG (repeatable): the articulated model (--articulated-model bunny: head and ears;
 //     armadillo: forearms and a knee; human: the SMPL body's arms, head and a knee; turned by DEG, ×1.1, 25 %
@@ -109,6 +112,43 @@ FitReport timed_fit(int repeat, const TriMesh& t, const Eigen::MatrixX3d& P, con
   return sorted[sorted.size() / 2];
 }
 
+// Per-seed results of one row over --seeds, and their summary line.
+struct SeedSummary {
+  std::vector<double> clean, hole_surface, hole_vertex, seconds;
+  int coarse_kept = 0;
+  void add(double c, double hs, double hv, const FitReport& r) {
+    clean.push_back(c);
+    hole_surface.push_back(hs);
+    hole_vertex.push_back(hv);
+    seconds.push_back(r.t_total);
+    coarse_kept += r.coarse_nodes > 0;
+  }
+};
+
+double mean_of(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? 0 : s / double(v.size());
+}
+
+// target: the clean-Hausdorff bound for the row (0: none)
+void print_summary(unsigned first, unsigned last, const SeedSummary& S, double target) {
+  if (S.clean.size() < 2) return;
+  std::vector<double> t = S.seconds;
+  std::sort(t.begin(), t.end());
+  const auto [cmin, cmax] = std::minmax_element(S.clean.begin(), S.clean.end());
+  char within[96] = "";
+  if (target > 0)
+    std::snprintf(within, sizeof within, ", within %.1f %%: %ld of %zu", 100 * target,
+                  long(std::count_if(S.clean.begin(), S.clean.end(), [&](double c) { return c <= target; })), S.clean.size());
+  std::printf("|   seeds %u-%u: clean %.3f-%.3f %% (mean %.3f)%s; hole surface %.3f-%.3f %% (mean %.3f), per vertex mean %.3f %%; "
+              "time median %.2f s (%.2f-%.2f); coarse stage's fit kept on %d of %zu | | | | | | | | |\n",
+              first, last, 100 * *cmin, 100 * *cmax, 100 * mean_of(S.clean), within,
+              100 * *std::min_element(S.hole_surface.begin(), S.hole_surface.end()),
+              100 * *std::max_element(S.hole_surface.begin(), S.hole_surface.end()), 100 * mean_of(S.hole_surface),
+              100 * mean_of(S.hole_vertex), t[t.size() / 2], t.front(), t.back(), S.coarse_kept, S.clean.size());
+}
+
 double median_of(std::vector<FitReport> r, double FitReport::*field) {
   std::vector<double> v;
   for (const auto& x : r) v.push_back(x.*field);
@@ -121,7 +161,7 @@ int main(int argc, char** argv) {
   bool poisson = true, detail_row = true;
   int repeat = 3;
   std::string only;
-  unsigned seed = 1;
+  unsigned seed = 1, seed_last = 1;  // --seed N, or --seeds A:B (the articulated and GT rows once per seed, then a summary)
   int n_markers = 20;
   FitParameters base;
   std::vector<double> articulated;  // --articulated DEG (repeatable): bunny head + ears turned by DEG
@@ -140,7 +180,14 @@ int main(int argc, char** argv) {
     else if (a == "--no-detail-row") detail_row = false;
     else if (a == "--repeat" && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
     else if (a == "--only" && i + 1 < argc) only = argv[++i];
-    else if (a == "--seed" && i + 1 < argc) seed = unsigned(std::atoi(argv[++i]));
+    else if (a == "--seed" && i + 1 < argc) seed = seed_last = unsigned(std::atoi(argv[++i]));
+    else if (a == "--seeds" && i + 1 < argc) {
+      const std::string v = argv[++i];
+      const std::size_t colon = v.find(':');
+      seed = unsigned(std::atoi(v.c_str()));
+      seed_last = colon == std::string::npos ? seed : unsigned(std::atoi(v.c_str() + colon + 1));
+      if (seed_last < seed) std::swap(seed, seed_last);
+    }
     else if (a == "--markers" && i + 1 < argc) n_markers = std::max(3, std::atoi(argv[++i]));
     else if (a == "--propagation-weight" && i + 1 < argc) base.propagation_weight = std::atof(argv[++i]);
     else if (a == "--rim-rejection" && i + 1 < argc) base.rim_rejection = std::atof(argv[++i]);
@@ -173,7 +220,7 @@ int main(int argc, char** argv) {
         if (const int nodes = std::atoi(item.c_str()); nodes != 0) base.coarse_prepass_nodes.push_back(nodes);
     }
     else {
-      std::fprintf(stderr, "usage: bench_fit [-v|--verbose] [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N] [--markers N] "
+      std::fprintf(stderr, "usage: bench_fit [-v|--verbose] [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N | --seeds A:B] [--markers N] "
                            "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--no-rotation-field] [--detail-rounds N] [--pull-rounds N] [--detail-no-pull] [--max-iterations N] "
                            "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--hole-axis 0|1|2] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
                            "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W] [--coarse-prepass N[,N...]]\n");
@@ -250,9 +297,11 @@ int main(int argc, char** argv) {
   for (double deg : articulated) {
     if (art.name != articulated_model && std::string(art.name).find(articulated_model) != 0) continue;
     const TriMesh t = read_mesh(kData + art.path);
+    SeedSummary with_markers, without_markers;
+    for (unsigned sd = seed; sd <= seed_last; ++sd) {
     synth::ScenarioOptions o;
     o.points = art.points;
-    o.seed = seed;
+    o.seed = sd;
     o.markers = n_markers;
     o.bend_deg = o.twist_deg = 0;
     o.scale = 1.1;
@@ -276,9 +325,11 @@ int main(int argc, char** argv) {
       const synth::ScenarioErrors me = synth::evaluate(s, mfit);
       char mname[160], mnote[256];
       std::snprintf(mname, sizeof mname, "%s %g deg, x1.05, 8 deg + 3.7%% off, NO markers", art.name, deg);
+      const double mhole = hole_error(s, mfit.V, mfit.F);
       std::snprintf(mnote, sizeof mnote, "clean Hausdorff %.3f%%; hole: surface %.3f%%, per vertex %.3f%%", 100 * me.hausdorff_clean_rel,
-                    100 * hole_error(s, mfit.V, mfit.F), 100 * me.hole_mean_rel);
+                    100 * mhole, 100 * me.hole_mean_rel);
       row(mname, 0, t.V.rows(), s.P.rows(), mr, mnote);
+      without_markers.add(me.hausdorff_clean_rel, mhole, me.hole_mean_rel, mr);
     }
     TriMesh fit;
     const FitReport r = timed_fit(repeat, s.templ, s.P, s.N, s.markers, fit, nullptr, base);
@@ -286,9 +337,12 @@ int main(int argc, char** argv) {
     if (!save_fit.empty()) write_mesh(save_fit + "_" + std::to_string(int(deg)) + ".obj", fit);
     char name[128], note[256];
     std::snprintf(name, sizeof name, "%s %g deg, %s, hole 25%%", art.name, deg, markerless ? "x1.05, 8 deg + 3.7% off" : "x1.1");
+    const double hole = hole_error(s, fit.V, fit.F);
     std::snprintf(note, sizeof note, "clean Hausdorff %.3f%%; hole: surface %.3f%%, per vertex %.3f%%", 100 * e.hausdorff_clean_rel,
-                  100 * hole_error(s, fit.V, fit.F), 100 * e.hole_mean_rel);
+                  100 * hole, 100 * e.hole_mean_rel);
+    if (seed_last > seed) std::snprintf(name + std::strlen(name), sizeof name - std::strlen(name), ", seed %u", sd);
     row(name, s.markers.size(), t.V.rows(), s.P.rows(), r, note);
+    with_markers.add(e.hausdorff_clean_rel, hole, e.hole_mean_rel, r);
     if (hole_oracle) {
       // the floor of as-rigid-as-possible hole filling on this scenario: a deformation graph
       // (400 nodes) driven by the TRUE position of every vertex outside the hole, after the
@@ -318,6 +372,15 @@ int main(int argc, char** argv) {
       }
       std::printf("|   hole floor (graph on the true positions outside the hole), stiffness %s |\n", floors.c_str());
     }
+    }  // seeds
+    // the bound on the clean Hausdorff: 0.3 % up to 30 deg, 0.5 % at 45 deg
+    const double target = deg <= 30 ? 0.003 : 0.005;
+    if (markerless && seed_last > seed) {
+      std::printf("| %s %g deg, NO markers, over seeds |\n", art.name, deg);
+      print_summary(seed, seed_last, without_markers, target);
+    }
+    if (seed_last > seed) std::printf("| %s %g deg, over seeds |\n", art.name, deg);
+    print_summary(seed, seed_last, with_markers, target);
   }
   // 2. ground truth scenarios on real meshes
   struct Case { const char* name; const char* path; int points; };
@@ -325,19 +388,25 @@ int main(int argc, char** argv) {
                         Case{"armadillo GT: bend+twist+x2, hole 25%", "/meshes/libigl__libigl-tutorial-data/armadillo.obj", 100000}}) {
     if (!wanted(c.name)) continue;
     const TriMesh t = read_mesh(kData + c.path);
+    SeedSummary gt, gt_detail;
+    for (unsigned sd = seed; sd <= seed_last; ++sd) {
     synth::ScenarioOptions o;
     o.points = c.points;
-    o.seed = seed;
+    o.seed = sd;
     o.markers = n_markers;
     const synth::Scenario s = synth::make_scenario(t, o);
     TriMesh fit;
     std::vector<FitReport> all;
     const FitReport r = timed_fit(repeat, s.templ, s.P, s.N, s.markers, fit, &all, base);
     const synth::ScenarioErrors e = synth::evaluate(s, fit);
-    char note[256];
+    char note[256], name[128];
+    const double hole = hole_error(s, fit.V, fit.F);
     std::snprintf(note, sizeof note, "clean Hausdorff %.3f%%; hole: surface %.3f%%; ROI incl. 10%% outliers", 100 * e.hausdorff_clean_rel,
-                  100 * hole_error(s, fit.V, fit.F));
-    row(c.name, s.markers.size(), t.V.rows(), s.P.rows(), r, note);
+                  100 * hole);
+    std::snprintf(name, sizeof name, "%s", c.name);
+    if (seed_last > seed) std::snprintf(name + std::strlen(name), sizeof name - std::strlen(name), ", seed %u", sd);
+    row(name, s.markers.size(), t.V.rows(), s.P.rows(), r, note);
+    gt.add(e.hausdorff_clean_rel, hole, e.hole_mean_rel, r);
     if (detail_row) {
       // the same with 4 detail rounds (FitParameters::detail_rounds; not a default: it costs
       // a factorization and a cloud -> mesh projection per round)
@@ -349,6 +418,7 @@ int main(int argc, char** argv) {
       std::snprintf(note, sizeof note, "detail rounds 4 (%.2f s of it): clean Hausdorff %.3f%%; hole: surface %.3f%%", dr.t_detail,
                     100 * de.hausdorff_clean_rel, 100 * hole_error(s, dfit.V, dfit.F));
       row("  same + 4 detail rounds", s.markers.size(), t.V.rows(), s.P.rows(), dr, note);
+      gt_detail.add(de.hausdorff_clean_rel, hole_error(s, dfit.V, dfit.F), de.hole_mean_rel, dr);
     }
     if (c.points >= 100000)
       std::printf("|   stages (median of %d): search + normals %.2f, initial %.2f, scale %.2f, coarse %.2f, iterations %.2f "
@@ -359,7 +429,7 @@ int main(int argc, char** argv) {
                   median_of(all, &FitReport::t_iterations), median_of(all, &FitReport::t_matching),
                   median_of(all, &FitReport::t_solve), median_of(all, &FitReport::t_propagation), median_of(all, &FitReport::t_pull),
                   median_of(all, &FitReport::t_metrics), r.t_total - r.t_metrics);
-    if (!poisson || c.points < 100000) continue;
+    if (!poisson || c.points < 100000) continue;  // (the next seed)
     // PCL Poisson on the same cloud (with its normals), same run
     pcl::PointCloud<pcl::PointNormal>::Ptr pc(new pcl::PointCloud<pcl::PointNormal>);
     for (Eigen::Index i = 0; i < s.P.rows(); ++i) {
@@ -379,6 +449,15 @@ int main(int argc, char** argv) {
       const TriMesh pt = from_pcl(pm);
       std::printf("|   PCL Poisson depth %d, same cloud | — | %6ld | %7ld | — | — | — | %6.2f | hole: surface %.3f%% (template fit %.3f%%); time ratio Poisson/fit %.2f (median fit)\n",
                   depth, (long)pt.V.rows(), (long)s.P.rows(), secs, 100 * hole_error(s, pt.V, pt.F), 100 * hole_error(s, fit.V, fit.F), secs / r.t_total);
+    }
+    }  // seeds
+    if (seed_last > seed) {
+      std::printf("| %s, over seeds |\n", c.name);
+      print_summary(seed, seed_last, gt, 0);
+      if (detail_row) {
+        std::printf("|   same + 4 detail rounds, over seeds |\n");
+        print_summary(seed, seed_last, gt_detail, 0);
+      }
     }
   }
   return 0;
