@@ -401,8 +401,8 @@ int main(int argc, char** argv) {
     const synth::ScenarioErrors e = synth::evaluate(s, fit);
     char note[256], name[128];
     const double hole = hole_error(s, fit.V, fit.F);
-    std::snprintf(note, sizeof note, "clean Hausdorff %.3f%%; hole: surface %.3f%%; ROI incl. 10%% outliers", 100 * e.hausdorff_clean_rel,
-                  100 * hole);
+    std::snprintf(note, sizeof note, "clean Hausdorff %.3f%%; hole: surface %.3f%%, per vertex %.3f%%; ROI incl. 10%% outliers",
+                  100 * e.hausdorff_clean_rel, 100 * hole, 100 * e.hole_mean_rel);
     std::snprintf(name, sizeof name, "%s", c.name);
     if (seed_last > seed) std::snprintf(name + std::strlen(name), sizeof name - std::strlen(name), ", seed %u", sd);
     row(name, s.markers.size(), t.V.rows(), s.P.rows(), r, note);
