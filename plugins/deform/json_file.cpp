@@ -1,6 +1,7 @@
 #include "tbsp/plugins/json_file.h"
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 
@@ -34,10 +35,24 @@ void JsonReader::fail(const std::string& where, const std::string& msg) const {
   throw FileError(source_ + ": " + where + ": " + msg);
 }
 
+namespace {
+// Lengths, positions and weights are squared by the solvers: beyond this the squares overflow
+// a double and a solve returns infinities (a fuzz finding: a target of -1e308 exited 3 with
+// "the solution is not finite", naming nothing).
+constexpr double kMaxJsonMagnitude = 1e150;
+
+std::string magnitude_message(double v) {
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "%.6g is out of range: numbers must be within +-1e150 (the solvers square them)", v);
+  return buf;
+}
+}  // namespace
+
 double JsonReader::number(const nlohmann::json& j, const std::string& where) const {
   if (!j.is_number()) fail(where, "expected a number");
   const double v = j.get<double>();
   if (!std::isfinite(v)) fail(where, "non-finite value: numbers must be finite");
+  if (std::abs(v) > kMaxJsonMagnitude) fail(where, magnitude_message(v));
   return v;
 }
 
@@ -55,6 +70,8 @@ Eigen::Vector3d JsonReader::vec3(const nlohmann::json& j, const std::string& whe
     v(k) = j[std::size_t(k)].get<double>();
   }
   if (!v.allFinite()) fail(where, "non-finite value: numbers must be finite");
+  for (int k = 0; k < 3; ++k)
+    if (std::abs(v(k)) > kMaxJsonMagnitude) fail(where, magnitude_message(v(k)));
   return v;
 }
 

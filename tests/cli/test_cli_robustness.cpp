@@ -168,6 +168,29 @@ TEST(CliRobustness, JsonNumberOutOfRangeExits2NamingTheFileInEveryJsonInput) {
   std::filesystem::remove_all(dir);
 }
 
+// Fuzz finding: a deform target of -1e308 is finite, but the solve squares it and returned
+// infinities: exit 3, "the solution is not finite", naming nothing. Numbers beyond ±1e150 are now
+// refused where they are read (every JSON front end's number and [x, y, z] reader).
+TEST(CliRobustness, JsonNumbersWhoseSquaresOverflowExit2NamingTheItem) {
+  const auto dir = test::temp_dir("rob_1e308");
+  const std::string cons = (dir / "cons.json").string(), handles = (dir / "handles.json").string();
+  std::ofstream(cons) << R"({"constraints": [{"vertex": 0, "target": [0, 0, -1e308], "hard": true}]})";
+  std::ofstream(handles) << R"({"handles": [{"vertex": 0, "target": [0, 0, 0]}, {"vertex": 1, "target": [2e150, 0, 0]}]})";
+  const std::string mesh = kTemplate;
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"deform --mesh " + mesh + " --constraints " + cons + " --out " + (dir / "o.ply").string(), "constraints[0].target"},
+      {"tetdeform --mesh " + mesh + " --handles " + handles + " --out " + (dir / "o.ply").string(), "handles[1].target"},
+  };
+  for (const auto& [c, item] : cases) {
+    const CliResult r = run_cli(c, dir);
+    EXPECT_EQ(r.code, 2) << c << "\n" << r.err;
+    EXPECT_NE(r.err.find(item), std::string::npos) << c << "\n" << r.err;
+    EXPECT_NE(r.err.find("1e150"), std::string::npos) << c << "\n" << r.err;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "o.ply"));
+  std::filesystem::remove_all(dir);
+}
+
 // Fuzz finding: "type": null or 5 in a deform constraint threw nlohmann's type_error (exit 1).
 TEST(CliRobustness, ConstraintTypeOfTheWrongKindNamesTheItem) {
   const auto dir = test::temp_dir("rob_type");

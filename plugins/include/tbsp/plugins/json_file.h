@@ -26,11 +26,11 @@ public:
   explicit JsonReader(std::string source) : source_(std::move(source)) {}
   const std::string& source() const { return source_; }
   [[noreturn]] void fail(const std::string& where, const std::string& msg) const;
-  /// A finite number.
+  /// A finite number within ±1e150 (the solvers square lengths and weights).
   double number(const nlohmann::json& j, const std::string& where) const;
-  /// A finite number > 0.
+  /// A finite number > 0, within 1e150.
   double positive(const nlohmann::json& j, const std::string& where) const;
-  /// Three finite numbers, [x, y, z].
+  /// Three finite numbers within ±1e150, [x, y, z].
   Eigen::Vector3d vec3(const nlohmann::json& j, const std::string& where) const;
   /// An integer (any range of long long).
   long long integer(const nlohmann::json& j, const std::string& where) const;
