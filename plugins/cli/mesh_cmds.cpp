@@ -87,6 +87,8 @@ int cmd_validate(const ValidateArgs& a) {
                         {"boundary_loops", r.boundary_loops},
                         {"euler_characteristic", r.euler_characteristic},
                         {"genus", r.genus},
+                        {"extent", r.extent},
+                        {"scale_out_of_range", r.scale_out_of_range},
                         {"nonfinite_vertices", r.nonfinite_vertices},
                         {"bad_index_faces", r.bad_index_faces},
                         {"degenerate_faces", r.degenerate_faces},

@@ -35,7 +35,7 @@ std::string first_edges(const std::vector<std::pair<int, int>>& v, std::size_t k
 }  // namespace
 
 bool MeshReport::isClean() const {
-  return num_vertices > 0 && num_faces > 0 && nonfinite_vertices.empty() && bad_index_faces.empty() &&
+  return num_vertices > 0 && num_faces > 0 && !scale_out_of_range && nonfinite_vertices.empty() && bad_index_faces.empty() &&
          degenerate_faces.empty() && duplicate_faces.empty() && isolated_vertices.empty() &&
          nonmanifold_edges.empty() && inconsistent_edges.empty() && components <= 1;
 }
@@ -50,6 +50,14 @@ std::string MeshReport::summary() const {
   auto line = [&](const char* what, std::size_t n, const std::string& items) {
     if (n) s << "  " << what << ": " << n << " [" << items << "]\n";
   };
+  if (scale_out_of_range) {
+    char buf[240];
+    std::snprintf(buf, sizeof buf,
+                  "  scale out of range: the coordinates reach %.3g, the bounding box's diagonal is %.3g (outside [1e-50, 1e50] "
+                  "areas and Laplacian weights under- or overflow: scale the mesh to a sane unit)\n",
+                  extent, diagonal);
+    s << buf;
+  }
   line("non-finite vertices", nonfinite_vertices.size(), first_items(nonfinite_vertices));
   line("faces with out-of-range indices", bad_index_faces.size(), first_items(bad_index_faces));
   line("degenerate faces", degenerate_faces.size(), first_items(degenerate_faces));
@@ -78,6 +86,10 @@ MeshReport validate_mesh(const TriMesh& mesh) {
     if (ok) good.push_back(f); else r.bad_index_faces.push_back(f);
   }
   const double diag = bbox_diagonal(V);
+  for (Eigen::Index i = 0; i < V.rows(); ++i)
+    if (V.row(i).allFinite()) r.extent = std::max(r.extent, V.row(i).cwiseAbs().maxCoeff());
+  r.diagonal = diag;
+  r.scale_out_of_range = r.extent > 1e50 || (diag > 0 && diag < 1e-50);
   const double area_eps = 1e-14 * diag * diag;
   std::vector<char> referenced(std::size_t(V.rows()), 0);
   // (sorted corners, face): sorted afterwards, every face after the first of an equal-corner
@@ -91,7 +103,9 @@ MeshReport validate_mesh(const TriMesh& mesh) {
     const int a = F(f, 0), b = F(f, 1), c = F(f, 2);
     referenced[std::size_t(a)] = referenced[std::size_t(b)] = referenced[std::size_t(c)] = 1;
     bool degenerate = a == b || b == c || a == c;
-    if (!degenerate && V.row(a).allFinite() && V.row(b).allFinite() && V.row(c).allFinite()) {
+    // (areas are not measured at a scale out of range: they overflow or underflow, and every face
+    // would be called degenerate; the report names the scale instead)
+    if (!degenerate && !r.scale_out_of_range && V.row(a).allFinite() && V.row(b).allFinite() && V.row(c).allFinite()) {
       const Eigen::Vector3d pa = V.row(a), pb = V.row(b), pc = V.row(c);
       degenerate = 0.5 * (pb - pa).cross(pc - pa).norm() <= area_eps;
     }

@@ -28,6 +28,12 @@ struct MeshReport {
   int euler_characteristic = 0;                      ///< V - E + F over referenced vertices
   /// Genus of a closed, connected, manifold mesh; -1 otherwise.
   int genus = -1;
+  /// Largest |coordinate| and the bounding box's diagonal of the finite vertices (length), and
+  /// whether they lie outside what the solvers can square: coordinates beyond 1e50 or a
+  /// diagonal below 1e-50 (areas and Laplacian weights overflow or underflow; every algorithm
+  /// refuses such a mesh, require_valid_mesh).
+  double extent = 0, diagonal = 0;
+  bool scale_out_of_range = false;
 
   /// True when nothing but boundaries was found (a clean, possibly open, manifold mesh).
   bool isClean() const;
