@@ -415,10 +415,11 @@ int main(int argc, char** argv) {
       TriMesh dfit;
       const FitReport dr = timed_fit(repeat, s.templ, s.P, s.N, s.markers, dfit, nullptr, dp);
       const synth::ScenarioErrors de = synth::evaluate(s, dfit);
+      const double dhole = hole_error(s, dfit.V, dfit.F);
       std::snprintf(note, sizeof note, "detail rounds 4 (%.2f s of it): clean Hausdorff %.3f%%; hole: surface %.3f%%", dr.t_detail,
-                    100 * de.hausdorff_clean_rel, 100 * hole_error(s, dfit.V, dfit.F));
+                    100 * de.hausdorff_clean_rel, 100 * dhole);
       row("  same + 4 detail rounds", s.markers.size(), t.V.rows(), s.P.rows(), dr, note);
-      gt_detail.add(de.hausdorff_clean_rel, hole_error(s, dfit.V, dfit.F), de.hole_mean_rel, dr);
+      gt_detail.add(de.hausdorff_clean_rel, dhole, de.hole_mean_rel, dr);
     }
     if (c.points >= 100000)
       std::printf("|   stages (median of %d): search + normals %.2f, initial %.2f, scale %.2f, coarse %.2f, iterations %.2f "
