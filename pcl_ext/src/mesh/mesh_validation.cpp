@@ -89,7 +89,7 @@ MeshReport validate_mesh(const TriMesh& mesh) {
   for (Eigen::Index i = 0; i < V.rows(); ++i)
     if (V.row(i).allFinite()) r.extent = std::max(r.extent, V.row(i).cwiseAbs().maxCoeff());
   r.diagonal = diag;
-  r.scale_out_of_range = r.extent > 1e50 || (diag > 0 && diag < 1e-50);
+  r.scale_out_of_range = r.extent > 1e50 || (diag > 0 && diag < 1e-50);  // (require_valid_mesh refuses it)
   const double area_eps = 1e-14 * diag * diag;
   std::vector<char> referenced(std::size_t(V.rows()), 0);
   // (sorted corners, face): sorted afterwards, every face after the first of an equal-corner
@@ -204,19 +204,16 @@ MeshReport require_valid_mesh(const TriMesh& mesh, const MeshRequirements& req, 
   if (!req.allow_nonmanifold && !r.nonmanifold_edges.empty())
     fail("non-manifold edges (shared by more than two faces): " + first_edges(r.nonmanifold_edges) +
          "; split them or remove the extra faces (`tbsp validate` lists all)");
-  {
-    // lengths enter the systems to the fourth power (the squared norm of a cross product in the
-    // cotangent weights and areas): beyond 1e50 they overflow, below 1e-50 they underflow (a
-    // 1e150 mesh ended in "not positive definite", a 1e-100 one in "every face has zero area")
-    const double extent = mesh.V.cwiseAbs().maxCoeff(), diag = bbox_diagonal(mesh.V);
+  // lengths enter the systems to the fourth power (the squared norm of a cross product in the
+  // cotangent weights and areas): beyond 1e50 they overflow, below 1e-50 they underflow (a
+  // 1e150 mesh ended in "not positive definite", a 1e-100 one in "every face has zero area")
+  if (r.scale_out_of_range) {
     char buf[320];
-    if (extent > 1e50 || (diag > 0 && diag < 1e-50)) {
-      std::snprintf(buf, sizeof buf,
-                    "the coordinates reach %.3g and the bounding box's diagonal is %.3g: outside [1e-50, 1e50] squared areas "
-                    "and the Laplacian's weights under- or overflow; scale the mesh to a sane unit (metres, millimetres)",
-                    extent, diag);
-      fail(buf);
-    }
+    std::snprintf(buf, sizeof buf,
+                  "the coordinates reach %.3g and the bounding box's diagonal is %.3g: outside [1e-50, 1e50] squared areas "
+                  "and the Laplacian's weights under- or overflow; scale the mesh to a sane unit (metres, millimetres)",
+                  r.extent, r.diagonal);
+    fail(buf);
   }
   if (r.degenerate_faces.size() == std::size_t(r.num_faces))
     fail("every face has zero area (the vertices coincide or lie on one line): there is no surface to process; check "
