@@ -32,6 +32,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -166,7 +167,7 @@ int main(int argc, char** argv) {
   FitParameters base;
   std::vector<double> articulated;  // --articulated DEG (repeatable): bunny head + ears turned by DEG
   std::string save_target;
-  std::string save_fit;  // --save-fit PREFIX: the real-scan rows' fits as PREFIX_DEG[_coarse].ply, the articulated ones' as PREFIX_DEG.obj
+  std::string save_fit;  // --save-fit PREFIX: the real-scan rows' fits as PREFIX_DEG[_coarse].ply (with the scan points, PREFIX_DEG[_coarse]_scan.ply, and their distances to the fit, _scan_distance.txt, for `tbsp render --scalar`), the articulated ones' as PREFIX_DEG.obj
   bool hole_oracle = false;  // --hole-oracle: with --articulated, the floor of rigidity-prior hole filling
   std::string articulated_model = "bunny";  // --articulated-model bunny|armadillo|human
   int hole_axis = 1;  // --hole-axis N: the articulated rows' hole across principal axis N (ScenarioOptions::hole_axis)
@@ -283,7 +284,15 @@ int main(int argc, char** argv) {
       std::snprintf(note, sizeof note, "%s: scan->fit p99 %.3f%%, max %.3f%%; scans->bun_zipper p99 %.3f%% (+0.05%% = %.3f%%: %s)", what,
                     100 * p99, 100 * d.maxCoeff() / diag, 100 * ref99, 100 * (ref99 + 5e-4), p99 <= ref99 + 5e-4 ? "within" : "NOT within");
       row(name, markers.size(), t.V.rows(), P.rows(), r, note);
-      if (!save_fit.empty()) write_mesh(save_fit + "_" + std::to_string(int(deg)) + (params.coarse_nodes > 0 && base.coarse_nodes <= 0 ? "_coarse" : "") + ".ply", fit);
+      if (!save_fit.empty()) {
+        const std::string stem = save_fit + "_" + std::to_string(int(deg)) + (params.coarse_nodes > 0 && base.coarse_nodes <= 0 ? "_coarse" : "");
+        write_mesh(stem + ".ply", fit);
+        // the scan points and their distances to the fit (% of the diagonal), for
+        // `tbsp render STEM_scan.ply --scalar STEM_scan_distance.txt`
+        { TriMesh cloud; cloud.V = P; cloud.F.resize(0, 3); write_mesh(stem + "_scan.ply", cloud); }
+        std::ofstream dist(stem + "_scan_distance.txt");
+        for (Eigen::Index i = 0; i < d.size(); ++i) dist << 100 * d[i] / diag << "\n";
+      }
     }
   }
   // 2a. articulated ground truth (fitting v2 issue): the model's head / ears / limbs turned by DEG
