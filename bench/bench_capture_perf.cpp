@@ -27,6 +27,9 @@
 //    PerformanceCaptureOptions (keyframe_interval, keyframe_iou, pose_rounds, smoothness,
 //    refine_iterations, handles, tets, anchor_weight, reject_px, deformer_iterations) for the
 //    --vlasic rows and the --capture-only row; --vlasic-only samba|crane runs one sequence.
+//    --vlasic-floor N: under each sequence's row, its control model (the same tets and handles)
+//    driven by the true positions of its handles, N deformer iterations per frame: the error a
+//    tracker that found every handle exactly would reach with this model.
 // 5. --stereo FRAMES: model-guided stereo after the silhouette refinement (stereo_refine) on the
 //    performer with 1 cm folds (detail 2): the same sequence without and with it.
 // 6. --hull FRAMES: a template placed by eye (turned about the vertical, scaled, moved) tracked
@@ -40,6 +43,7 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -57,6 +61,10 @@
 #include "tbsp/mesh/remeshing.h"
 #include "tbsp/mesh/similarity_icp.h"
 #include "tbsp/mesh/tetrahedralize.h"
+#include "tbsp/mesh/tet_mesh.h"
+#include "tbsp/mesh/point_search.h"
+#include "tbsp/deform/tet_deformer.h"
+#include "tbsp/deform/deformation_transfer.h"
 #include "tbsp/io/studio.h"
 #include "tbsp/multiview/marker_animation.h"
 #include "tbsp/multiview/performance_capture.h"
@@ -261,7 +269,79 @@ double mesh_volume(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
   return v;
 }
 
-void vlasic_rows(int steps, int size, InBetween mode, const PerformanceCaptureOptions& po, const std::string& only) {
+// The control model's floor: the tracker's tet mesh and handles (built as PerformanceCapture::start
+// builds them: TetGen to `tets`, per component, or a shell of the decimated surface; `handles`
+// farthest-point samples of its surface vertices) driven by the *true* positions of its handles
+// in every frame (each handle's closest template surface point, carried by the truth's
+// vertices), `iterations` deformer iterations per frame warm-started from the last, carried to
+// the template by the same transfer. Mean vertex error per frame (fraction of `diag`): what a
+// tracker that found every handle exactly would reach with this model.
+std::vector<double> control_model_floor(const TriMesh& templ, const std::vector<Eigen::MatrixX3d>& truth, const PerformanceCaptureOptions& po,
+                                        int iterations, double diag) {
+  TetMesh tets;
+  Eigen::MatrixX3i surface;
+  try {
+    try {
+      tets = tetrahedralize_to_size(templ, po.tets);
+    } catch (const Error&) {
+      tets = tetrahedralize_components(templ, po.tets);
+    }
+    surface = tet_boundary_faces(tets.T);
+  } catch (const Error&) {
+    const TriMesh dec = po.tets > 0 && po.tets < templ.F.rows() ? decimate_mesh(templ, po.tets) : templ;
+    tets = surface_to_tets(dec);
+    surface = dec.F;
+  }
+  std::vector<int> on_surface;
+  {
+    std::vector<char> on(std::size_t(tets.V.rows()), 0);
+    for (Eigen::Index f = 0; f < surface.rows(); ++f)
+      for (int c = 0; c < 3; ++c)
+        if (!on[std::size_t(surface(f, c))]) {
+          on[std::size_t(surface(f, c))] = 1;
+          on_surface.push_back(surface(f, c));
+        }
+  }
+  const std::vector<int> handles = farthest_point_sample(tets.V, on_surface, po.handles);
+  std::vector<int> face(handles.size());
+  std::vector<Eigen::Vector3d> bary(handles.size());
+  for (std::size_t h = 0; h < handles.size(); ++h) {
+    const Eigen::Vector3d p = tets.V.row(handles[h]).transpose();
+    double best = std::numeric_limits<double>::infinity();
+    for (Eigen::Index f = 0; f < templ.F.rows(); ++f) {
+      const Eigen::Vector3d a = templ.V.row(templ.F(f, 0)).transpose(), b = templ.V.row(templ.F(f, 1)).transpose(),
+                            c = templ.V.row(templ.F(f, 2)).transpose();
+      const Eigen::Vector3d w = closest_point_barycentric(p, a, b, c);
+      const double d = (w(0) * a + w(1) * b + w(2) * c - p).squaredNorm();
+      if (d < best) {
+        best = d;
+        face[h] = int(f);
+        bary[h] = w;
+      }
+    }
+  }
+  TetDeformer D;
+  D.setMesh(tets);
+  for (int v : handles) D.addVertexHandle(v, tets.V.row(v).transpose());
+  DeformationTransfer transfer;
+  DeformationTransferOptions to;
+  to.radius = po.transfer_radius;
+  transfer.setOptions(to);
+  transfer.precompute(tets, templ.V);
+  std::vector<double> err;
+  for (const Eigen::MatrixX3d& T : truth) {
+    for (std::size_t h = 0; h < handles.size(); ++h) {
+      Eigen::Vector3d q = Eigen::Vector3d::Zero();
+      for (int c = 0; c < 3; ++c) q += bary[h](c) * T.row(templ.F(face[h], c)).transpose();
+      D.setHandleTarget(int(h), q);
+    }
+    for (int it = 0; it < iterations; ++it) D.iterate();
+    err.push_back((transfer.apply(D.inputPositions()) - T).rowwise().norm().mean() / diag);
+  }
+  return err;
+}
+
+void vlasic_rows(int steps, int size, InBetween mode, const PerformanceCaptureOptions& po, const std::string& only, int floor_iterations) {
   const std::string base = std::string(TBSP_SHARED_DATA_DIR) + "/meshes/CraGL__Hyperspectral-Inverse-Skinning/models/";
   std::printf("\n## Performance capture of the Vlasic meshes (8 views of %dx%d, %d in-between frames per 50 captured frames, %s)\n\n", size, size,
               steps,
@@ -321,6 +401,16 @@ void vlasic_rows(int steps, int size, InBetween mode, const PerformanceCaptureOp
                 100 * err[std::size_t(steps)], 100 * err[std::size_t(2 * steps)], 100 * err[std::size_t(3 * steps)], iou[std::size_t(steps)],
                 iou[std::size_t(2 * steps)], iou[std::size_t(3 * steps)], 100 * *std::max_element(err.begin(), err.end()),
                 *std::min_element(iou.begin(), iou.end()), err.size() > 5 ? err.back() / err[5] : 0.0, pc.report().failed_frames, secs);
+    if (floor_iterations > 0) {
+      const std::vector<double> fl = control_model_floor(key[0], truth, po, floor_iterations, diag);
+      std::fprintf(stderr, "%s, the control model driven by its handles' true positions (%d deformer iterations per frame): mean vertex error (%% diag):", seq,
+                   floor_iterations);
+      for (std::size_t k = 0; k < fl.size(); ++k) std::fprintf(stderr, "%s%.2f", k % 8 ? " " : "\n  ", 100 * fl[k]);
+      std::fprintf(stderr, "\n");
+      std::printf("| %s: its control model driven by the handles' true positions | | | | %.2f / %.2f / %.2f | | %.2f | | %.2f | | |\n", seq,
+                  100 * fl[std::size_t(steps)], 100 * fl[std::size_t(2 * steps)], 100 * fl[std::size_t(3 * steps)],
+                  100 * *std::max_element(fl.begin(), fl.end()), fl.size() > 5 ? fl.back() / fl[5] : 0.0);
+    }
     std::fflush(stdout);
   }
 }
@@ -438,6 +528,7 @@ int main(int argc, char** argv) {
   bool capture_only = false;
   InBetween vlasic_mode = InBetween::linear;
   std::string vlasic_only;  // samba or crane; empty = both
+  int floor_iterations = 0;  // --vlasic-floor N: also the control model driven by its handles' true positions
   int capture_detail = 1;
   PerformanceCaptureOptions po;  // defaults, unless a flag below changes them
   for (int i = 1; i < argc; ++i) {
@@ -462,8 +553,9 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--reject-px") && i + 1 < argc) po.reject_px = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--deformer-iterations") && i + 1 < argc) po.deformer_iterations = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--vlasic-only") && i + 1 < argc) vlasic_only = argv[++i];
+    else if (!std::strcmp(argv[i], "--vlasic-floor") && i + 1 < argc) floor_iterations = std::max(0, std::atoi(argv[++i]));
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn | --vlasic-rigid]] [--keyframes N [--keyframe-iou X]] [--pose-rounds N] [--smoothness X] [--refine N] [--handles N] [--tets N] [--anchor-weight X] [--reject-px X] [--deformer-iterations N] [--vlasic-only samba|crane] [--stereo FRAMES] [--hull FRAMES]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn | --vlasic-rigid]] [--keyframes N [--keyframe-iou X]] [--pose-rounds N] [--smoothness X] [--refine N] [--handles N] [--tets N] [--anchor-weight X] [--reject-px X] [--deformer-iterations N] [--vlasic-only samba|crane] [--vlasic-floor ITERATIONS] [--stereo FRAMES] [--hull FRAMES]\n");
       return 2;
     }
   }
@@ -474,7 +566,7 @@ int main(int argc, char** argv) {
       return 2;
     }
     if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {capture_detail}, po);
-    if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_mode, po, vlasic_only);
+    if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_mode, po, vlasic_only, floor_iterations);
     if (stereo > 0) stereo_rows(stereo, capture_size);
     if (hull > 0) hull_rows(hull, capture_size);
     return 0;
