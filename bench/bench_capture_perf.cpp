@@ -277,7 +277,7 @@ double mesh_volume(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
 // the template by the same transfer. Mean vertex error per frame (fraction of `diag`): what a
 // tracker that found every handle exactly would reach with this model.
 std::vector<double> control_model_floor(const TriMesh& templ, const std::vector<Eigen::MatrixX3d>& truth, const PerformanceCaptureOptions& po,
-                                        int iterations, double diag) {
+                                        int iterations, double diag, Eigen::Index* tet_vertices = nullptr) {
   TetMesh tets;
   Eigen::MatrixX3i surface;
   try {
@@ -303,6 +303,7 @@ std::vector<double> control_model_floor(const TriMesh& templ, const std::vector<
         }
   }
   const std::vector<int> handles = farthest_point_sample(tets.V, on_surface, po.handles);
+  if (tet_vertices) *tet_vertices = tets.V.rows();
   std::vector<int> face(handles.size());
   std::vector<Eigen::Vector3d> bary(handles.size());
   for (std::size_t h = 0; h < handles.size(); ++h) {
@@ -402,7 +403,11 @@ void vlasic_rows(int steps, int size, InBetween mode, const PerformanceCaptureOp
                 iou[std::size_t(2 * steps)], iou[std::size_t(3 * steps)], 100 * *std::max_element(err.begin(), err.end()),
                 *std::min_element(iou.begin(), iou.end()), err.size() > 5 ? err.back() / err[5] : 0.0, pc.report().failed_frames, secs);
     if (floor_iterations > 0) {
-      const std::vector<double> fl = control_model_floor(key[0], truth, po, floor_iterations, diag);
+      Eigen::Index tet_vertices = 0;
+      const std::vector<double> fl = control_model_floor(key[0], truth, po, floor_iterations, diag, &tet_vertices);
+      if (tet_vertices != pc.report().tet_vertices)  // the two constructions must agree
+        std::fprintf(stderr, "warning: the floor's control mesh has %ld vertices, the tracker's %ld\n", long(tet_vertices),
+                     long(pc.report().tet_vertices));
       std::fprintf(stderr, "%s, the control model driven by its handles' true positions (%d deformer iterations per frame): mean vertex error (%% diag):", seq,
                    floor_iterations);
       for (std::size_t k = 0; k < fl.size(); ++k) std::fprintf(stderr, "%s%.2f", k % 8 ? " " : "\n  ", 100 * fl[k]);
