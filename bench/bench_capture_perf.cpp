@@ -27,9 +27,9 @@
 //    PerformanceCaptureOptions (keyframe_interval, keyframe_iou, pose_rounds, smoothness,
 //    refine_iterations, handles, tets, anchor_weight, reject_px, deformer_iterations) for the
 //    --vlasic rows and the --capture-only row; --vlasic-only samba|crane runs one sequence.
-//    --vlasic-floor N: under each sequence's row, its control model (the same tets and handles)
-//    driven by the true positions of its handles, N deformer iterations per frame: the error a
-//    tracker that found every handle exactly would reach with this model.
+//    --floor N: under each sequence's row (and the --capture-only row), its control model (the
+//    same tets and handles) driven by the true positions of its handles, N deformer iterations
+//    per frame: the error a tracker that found every handle exactly would reach with this model.
 // 5. --stereo FRAMES: model-guided stereo after the silhouette refinement (stereo_refine) on the
 //    performer with 1 cm folds (detail 2): the same sequence without and with it.
 // 6. --hull FRAMES: a template placed by eye (turned about the vertical, scaled, moved) tracked
@@ -112,7 +112,10 @@ void track_sequence(const SynthSequence& seq, PerformanceCapture& pc, OnFrame on
   }
 }
 
-void capture_rows(int frames, int size, const std::vector<int>& details, const PerformanceCaptureOptions& po = {}) {
+std::vector<double> control_model_floor(const TriMesh& templ, const std::vector<Eigen::MatrixX3d>& truth, const PerformanceCaptureOptions& po,
+                                        int iterations, double diag, Eigen::Index* tet_vertices = nullptr);
+
+void capture_rows(int frames, int size, const std::vector<int>& details, const PerformanceCaptureOptions& po = {}, int floor_iterations = 0) {
   std::printf("\n## Performance capture (8 views of %dx%d, %d frames; medians per frame, seconds)\n\n", size, size, frames);
   std::printf("| template vertices | control tets | setup | SIFT | matching + lifting | pose | optimization | transfer | refinement | total per frame | "
               "worst mean vertex error (%% diag) | worst view IoU | error last / frame 5 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
@@ -141,6 +144,14 @@ void capture_rows(int frames, int size, const std::vector<int>& details, const P
     std::printf("| %ld | %ld | %.2f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.3f | %.4f | %.2f |\n", long(rest.V.rows()), long(r.tets),
                 r.t_setup, median(t[0]), median(t[1]), median(t[2]), median(t[3]), median(t[4]), median(t[5]), median(t[6]),
                 100 * *std::max_element(err.begin(), err.end()), worst_iou, err.size() > 5 ? err.back() / err[5] : 0.0);
+    if (floor_iterations > 0) {  // the control model driven by its handles' true positions
+      Eigen::Index tet_vertices = 0;
+      const std::vector<double> fl = control_model_floor(rest, truth, po, floor_iterations, diag, &tet_vertices);
+      if (tet_vertices != r.tet_vertices)
+        std::fprintf(stderr, "warning: the floor's control mesh has %ld vertices, the tracker's %ld\n", long(tet_vertices), long(r.tet_vertices));
+      std::printf("| %ld, its control model driven by the handles' true positions (%d deformer iterations per frame) | | | | | | | | | | %.3f | | %.2f |\n",
+                  long(rest.V.rows()), floor_iterations, 100 * *std::max_element(fl.begin(), fl.end()), fl.size() > 5 ? fl.back() / fl[5] : 0.0);
+    }
     // The optional temporal smoothing of the trajectories (TrajectorySmoother) on the same run.
     for (double sigma : {1.0, 2.0}) {
       const std::vector<Eigen::MatrixX3d> sm = smooth_trajectories(tracked, sigma);
@@ -277,7 +288,7 @@ double mesh_volume(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
 // the template by the same transfer. Mean vertex error per frame (fraction of `diag`): what a
 // tracker that found every handle exactly would reach with this model.
 std::vector<double> control_model_floor(const TriMesh& templ, const std::vector<Eigen::MatrixX3d>& truth, const PerformanceCaptureOptions& po,
-                                        int iterations, double diag, Eigen::Index* tet_vertices = nullptr) {
+                                        int iterations, double diag, Eigen::Index* tet_vertices) {
   TetMesh tets;
   Eigen::MatrixX3i surface;
   try {
@@ -533,7 +544,7 @@ int main(int argc, char** argv) {
   bool capture_only = false;
   InBetween vlasic_mode = InBetween::linear;
   std::string vlasic_only;  // samba or crane; empty = both
-  int floor_iterations = 0;  // --vlasic-floor N: also the control model driven by its handles' true positions
+  int floor_iterations = 0;  // --floor N: also the control model driven by its handles' true positions
   int capture_detail = 1;
   PerformanceCaptureOptions po;  // defaults, unless a flag below changes them
   for (int i = 1; i < argc; ++i) {
@@ -558,9 +569,9 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--reject-px") && i + 1 < argc) po.reject_px = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--deformer-iterations") && i + 1 < argc) po.deformer_iterations = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--vlasic-only") && i + 1 < argc) vlasic_only = argv[++i];
-    else if (!std::strcmp(argv[i], "--vlasic-floor") && i + 1 < argc) floor_iterations = std::max(0, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--floor") && i + 1 < argc) floor_iterations = std::max(0, std::atoi(argv[++i]));
     else {
-      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn | --vlasic-rigid]] [--keyframes N [--keyframe-iou X]] [--pose-rounds N] [--smoothness X] [--refine N] [--handles N] [--tets N] [--anchor-weight X] [--reject-px X] [--deformer-iterations N] [--vlasic-only samba|crane] [--vlasic-floor ITERATIONS] [--stereo FRAMES] [--hull FRAMES]\n");
+      std::fprintf(stderr, "usage: bench_capture_perf [--repeats N] [--capture-frames N (10; 0 = none)] [--capture-size PX (1004)] [--capture-only [--capture-detail 1|2 (1)]] [--vlasic STEPS [--vlasic-turn | --vlasic-rigid]] [--keyframes N [--keyframe-iou X]] [--pose-rounds N] [--smoothness X] [--refine N] [--handles N] [--tets N] [--anchor-weight X] [--reject-px X] [--deformer-iterations N] [--vlasic-only samba|crane] [--floor ITERATIONS] [--stereo FRAMES] [--hull FRAMES]\n");
       return 2;
     }
   }
@@ -570,7 +581,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "bench_capture_perf: %s\n", why.c_str());
       return 2;
     }
-    if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {capture_detail}, po);
+    if (capture_frames > 0 && capture_only) capture_rows(capture_frames, capture_size, {capture_detail}, po, floor_iterations);
     if (vlasic > 0) vlasic_rows(vlasic, capture_size, vlasic_mode, po, vlasic_only, floor_iterations);
     if (stereo > 0) stereo_rows(stereo, capture_size);
     if (hull > 0) hull_rows(hull, capture_size);
