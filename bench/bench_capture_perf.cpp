@@ -43,7 +43,6 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
-#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -61,8 +60,6 @@
 #include "tbsp/mesh/remeshing.h"
 #include "tbsp/mesh/similarity_icp.h"
 #include "tbsp/mesh/tetrahedralize.h"
-#include "tbsp/mesh/tet_mesh.h"
-#include "tbsp/mesh/point_search.h"
 #include "tbsp/deform/tet_deformer.h"
 #include "tbsp/deform/deformation_transfer.h"
 #include "tbsp/io/studio.h"
@@ -113,7 +110,7 @@ void track_sequence(const SynthSequence& seq, PerformanceCapture& pc, OnFrame on
 }
 
 std::vector<double> control_model_floor(const TriMesh& templ, const std::vector<Eigen::MatrixX3d>& truth, const PerformanceCaptureOptions& po,
-                                        int iterations, double diag, Eigen::Index* tet_vertices = nullptr);
+                                        int iterations, double diag);
 
 void capture_rows(int frames, int size, const std::vector<int>& details, const PerformanceCaptureOptions& po = {}, int floor_iterations = 0) {
   std::printf("\n## Performance capture (8 views of %dx%d, %d frames; medians per frame, seconds)\n\n", size, size, frames);
@@ -145,10 +142,7 @@ void capture_rows(int frames, int size, const std::vector<int>& details, const P
                 r.t_setup, median(t[0]), median(t[1]), median(t[2]), median(t[3]), median(t[4]), median(t[5]), median(t[6]),
                 100 * *std::max_element(err.begin(), err.end()), worst_iou, err.size() > 5 ? err.back() / err[5] : 0.0);
     if (floor_iterations > 0) {  // the control model driven by its handles' true positions
-      Eigen::Index tet_vertices = 0;
-      const std::vector<double> fl = control_model_floor(rest, truth, po, floor_iterations, diag, &tet_vertices);
-      if (tet_vertices != r.tet_vertices)
-        std::fprintf(stderr, "warning: the floor's control mesh has %ld vertices, the tracker's %ld\n", long(tet_vertices), long(r.tet_vertices));
+      const std::vector<double> fl = control_model_floor(rest, truth, po, floor_iterations, diag);
       std::printf("| %ld, its control model driven by the handles' true positions (%d deformer iterations per frame) | | | | | | | | | | %.3f | | %.2f |\n",
                   long(rest.V.rows()), floor_iterations, 100 * *std::max_element(fl.begin(), fl.end()), fl.size() > 5 ? fl.back() / fl[5] : 0.0);
     }
@@ -280,58 +274,27 @@ double mesh_volume(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F) {
   return v;
 }
 
-// The control model's floor: the tracker's tet mesh and handles (built as PerformanceCapture::start
-// builds them: TetGen to `tets`, per component, or a shell of the decimated surface; `handles`
-// farthest-point samples of its surface vertices) driven by the *true* positions of its handles
+// The control model's floor: the tracker's tet mesh and handles (build_capture_control_model, as
+// PerformanceCapture::start builds them) driven by the *true* positions of its handles
 // in every frame (each handle's closest template surface point, carried by the truth's
 // vertices), `iterations` deformer iterations per frame warm-started from the last, carried to
 // the template by the same transfer. Mean vertex error per frame (fraction of `diag`): what a
 // tracker that found every handle exactly would reach with this model.
 std::vector<double> control_model_floor(const TriMesh& templ, const std::vector<Eigen::MatrixX3d>& truth, const PerformanceCaptureOptions& po,
-                                        int iterations, double diag, Eigen::Index* tet_vertices) {
-  TetMesh tets;
-  Eigen::MatrixX3i surface;
-  try {
-    try {
-      tets = tetrahedralize_to_size(templ, po.tets);
-    } catch (const Error&) {
-      tets = tetrahedralize_components(templ, po.tets);
-    }
-    surface = tet_boundary_faces(tets.T);
-  } catch (const Error&) {
-    const TriMesh dec = po.tets > 0 && po.tets < templ.F.rows() ? decimate_mesh(templ, po.tets) : templ;
-    tets = surface_to_tets(dec);
-    surface = dec.F;
-  }
-  std::vector<int> on_surface;
-  {
-    std::vector<char> on(std::size_t(tets.V.rows()), 0);
-    for (Eigen::Index f = 0; f < surface.rows(); ++f)
-      for (int c = 0; c < 3; ++c)
-        if (!on[std::size_t(surface(f, c))]) {
-          on[std::size_t(surface(f, c))] = 1;
-          on_surface.push_back(surface(f, c));
-        }
-  }
-  const std::vector<int> handles = farthest_point_sample(tets.V, on_surface, po.handles);
-  if (tet_vertices) *tet_vertices = tets.V.rows();
-  std::vector<int> face(handles.size());
+                                        int iterations, double diag) {
+  const CaptureControlModel cm = build_capture_control_model(templ, po.tets, po.handles);
+  const TetMesh& tets = cm.tets;
+  const std::vector<int>& handles = cm.handles;
+  // each handle's closest template surface point: face, barycentrics
+  Eigen::MatrixX3d H(Eigen::Index(handles.size()), 3);
+  for (std::size_t h = 0; h < handles.size(); ++h) H.row(Eigen::Index(h)) = tets.V.row(handles[h]);
+  Eigen::VectorXi face;
+  point_mesh_distances(templ.V, templ.F, H, &face);
   std::vector<Eigen::Vector3d> bary(handles.size());
-  for (std::size_t h = 0; h < handles.size(); ++h) {
-    const Eigen::Vector3d p = tets.V.row(handles[h]).transpose();
-    double best = std::numeric_limits<double>::infinity();
-    for (Eigen::Index f = 0; f < templ.F.rows(); ++f) {
-      const Eigen::Vector3d a = templ.V.row(templ.F(f, 0)).transpose(), b = templ.V.row(templ.F(f, 1)).transpose(),
-                            c = templ.V.row(templ.F(f, 2)).transpose();
-      const Eigen::Vector3d w = closest_point_barycentric(p, a, b, c);
-      const double d = (w(0) * a + w(1) * b + w(2) * c - p).squaredNorm();
-      if (d < best) {
-        best = d;
-        face[h] = int(f);
-        bary[h] = w;
-      }
-    }
-  }
+  for (std::size_t h = 0; h < handles.size(); ++h)
+    bary[h] = closest_point_barycentric(H.row(Eigen::Index(h)).transpose(), templ.V.row(templ.F(face(Eigen::Index(h)), 0)).transpose(),
+                                        templ.V.row(templ.F(face(Eigen::Index(h)), 1)).transpose(),
+                                        templ.V.row(templ.F(face(Eigen::Index(h)), 2)).transpose());
   TetDeformer D;
   D.setMesh(tets);
   for (int v : handles) D.addVertexHandle(v, tets.V.row(v).transpose());
@@ -344,7 +307,7 @@ std::vector<double> control_model_floor(const TriMesh& templ, const std::vector<
   for (const Eigen::MatrixX3d& T : truth) {
     for (std::size_t h = 0; h < handles.size(); ++h) {
       Eigen::Vector3d q = Eigen::Vector3d::Zero();
-      for (int c = 0; c < 3; ++c) q += bary[h](c) * T.row(templ.F(face[h], c)).transpose();
+      for (int c = 0; c < 3; ++c) q += bary[h](c) * T.row(templ.F(face(Eigen::Index(h)), c)).transpose();
       D.setHandleTarget(int(h), q);
     }
     for (int it = 0; it < iterations; ++it) D.iterate();
@@ -414,11 +377,7 @@ void vlasic_rows(int steps, int size, InBetween mode, const PerformanceCaptureOp
                 iou[std::size_t(2 * steps)], iou[std::size_t(3 * steps)], 100 * *std::max_element(err.begin(), err.end()),
                 *std::min_element(iou.begin(), iou.end()), err.size() > 5 ? err.back() / err[5] : 0.0, pc.report().failed_frames, secs);
     if (floor_iterations > 0) {
-      Eigen::Index tet_vertices = 0;
-      const std::vector<double> fl = control_model_floor(key[0], truth, po, floor_iterations, diag, &tet_vertices);
-      if (tet_vertices != pc.report().tet_vertices)  // the two constructions must agree
-        std::fprintf(stderr, "warning: the floor's control mesh has %ld vertices, the tracker's %ld\n", long(tet_vertices),
-                     long(pc.report().tet_vertices));
+      const std::vector<double> fl = control_model_floor(key[0], truth, po, floor_iterations, diag);
       std::fprintf(stderr, "%s, the control model driven by its handles' true positions (%d deformer iterations per frame): mean vertex error (%% diag):", seq,
                    floor_iterations);
       for (std::size_t k = 0; k < fl.size(); ++k) std::fprintf(stderr, "%s%.2f", k % 8 ? " " : "\n  ", 100 * fl[k]);

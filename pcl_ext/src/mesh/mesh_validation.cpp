@@ -32,6 +32,16 @@ std::string first_edges(const std::vector<std::pair<int, int>>& v, std::size_t k
   return s.str();
 }
 
+// What a mesh out of the solvers' range is told (the report's summary and require_valid_mesh).
+std::string scale_problem(double extent, double diagonal) {
+  char buf[320];
+  std::snprintf(buf, sizeof buf,
+                "the coordinates reach %.3g and the bounding box's diagonal is %.3g: outside [1e-50, 1e50] squared areas "
+                "and the Laplacian's weights under- or overflow; scale the mesh to a sane unit (metres, millimetres)",
+                extent, diagonal);
+  return buf;
+}
+
 }  // namespace
 
 bool MeshReport::isClean() const {
@@ -50,14 +60,7 @@ std::string MeshReport::summary() const {
   auto line = [&](const char* what, std::size_t n, const std::string& items) {
     if (n) s << "  " << what << ": " << n << " [" << items << "]\n";
   };
-  if (scale_out_of_range) {
-    char buf[240];
-    std::snprintf(buf, sizeof buf,
-                  "  scale out of range: the coordinates reach %.3g, the bounding box's diagonal is %.3g (outside [1e-50, 1e50] "
-                  "areas and Laplacian weights under- or overflow: scale the mesh to a sane unit)\n",
-                  extent, diagonal);
-    s << buf;
-  }
+  if (scale_out_of_range) s << "  scale out of range: " << scale_problem(extent, diagonal) << "\n";
   line("non-finite vertices", nonfinite_vertices.size(), first_items(nonfinite_vertices));
   line("faces with out-of-range indices", bad_index_faces.size(), first_items(bad_index_faces));
   line("degenerate faces", degenerate_faces.size(), first_items(degenerate_faces));
@@ -207,14 +210,7 @@ MeshReport require_valid_mesh(const TriMesh& mesh, const MeshRequirements& req, 
   // lengths enter the systems to the fourth power (the squared norm of a cross product in the
   // cotangent weights and areas): beyond 1e50 they overflow, below 1e-50 they underflow (a
   // 1e150 mesh ended in "not positive definite", a 1e-100 one in "every face has zero area")
-  if (r.scale_out_of_range) {
-    char buf[320];
-    std::snprintf(buf, sizeof buf,
-                  "the coordinates reach %.3g and the bounding box's diagonal is %.3g: outside [1e-50, 1e50] squared areas "
-                  "and the Laplacian's weights under- or overflow; scale the mesh to a sane unit (metres, millimetres)",
-                  r.extent, r.diagonal);
-    fail(buf);
-  }
+  if (r.scale_out_of_range) fail(scale_problem(r.extent, r.diagonal));
   if (r.degenerate_faces.size() == std::size_t(r.num_faces))
     fail("every face has zero area (the vertices coincide or lie on one line): there is no surface to process; check "
          "the vertex coordinates (units, a failed export)");

@@ -57,6 +57,40 @@ bool PerformanceCaptureOptions::isValid(std::string* why) const {
   return true;
 }
 
+CaptureControlModel build_capture_control_model(const TriMesh& templ, int tets, int handles, const TetMesh* given) {
+  CaptureControlModel cm;
+  if (given) {
+    cm.tets = *given;
+    cm.surface = tet_boundary_faces(cm.tets.T);
+  } else {
+    try {
+      try {
+        cm.tets = tetrahedralize_to_size(templ, tets);
+      } catch (const Error&) {
+        cm.tets = tetrahedralize_components(templ, tets);  // overlapping closed parts
+        cm.per_component = true;
+      }
+      cm.surface = tet_boundary_faces(cm.tets.T);
+    } catch (const Error&) {
+      const TriMesh dec = tets > 0 && tets < templ.F.rows() ? decimate_mesh(templ, tets) : templ;
+      cm.tets = surface_to_tets(dec);  // one tetrahedron per triangle (§10.8)
+      cm.surface = dec.F;
+      cm.shell = true;
+    }
+  }
+  std::vector<char> on(std::size_t(cm.tets.V.rows()), 0);
+  for (Eigen::Index f = 0; f < cm.surface.rows(); ++f)
+    for (int c = 0; c < 3; ++c) {
+      const int v = cm.surface(f, c);
+      if (!on[std::size_t(v)]) {
+        on[std::size_t(v)] = 1;
+        cm.surface_vertices.push_back(v);
+      }
+    }
+  cm.handles = farthest_point_sample(cm.tets.V, cm.surface_vertices, handles);
+  return cm;
+}
+
 struct PerformanceCapture::Impl {
   TetMesh tets;
   TetDeformer D;
@@ -128,42 +162,15 @@ void PerformanceCapture::start(const Eigen::Matrix4d* registration) {
   Impl& I = *impl_;
   report_ = PerformanceCaptureReport{};
   report_progress(progress_, 0.0, "tetrahedralize");
-  // The control surface: the tet mesh's boundary, or for a shell (a template TetGen refuses:
-  // open, or parts modelled as overlapping closed bodies) the decimated surface itself (the
-  // shell's apexes are inside and not part of it).
-  if (tets_given_) {
-    require_valid_tet_mesh(given_tets, who);
-    I.tets = given_tets;
-    I.surf_faces = tet_boundary_faces(I.tets.T);
-  } else {
-    try {
-      try {
-        I.tets = tetrahedralize_to_size(templ, options_.tets);
-      } catch (const Error&) {
-        I.tets = tetrahedralize_components(templ, options_.tets);  // overlapping closed parts
-        report_.per_component_tets = true;
-      }
-      I.surf_faces = tet_boundary_faces(I.tets.T);
-    } catch (const Error&) {
-      const TriMesh dec = options_.tets > 0 && options_.tets < templ.F.rows() ? decimate_mesh(templ, options_.tets) : templ;
-      I.tets = surface_to_tets(dec);  // one tetrahedron per triangle (§10.8)
-      I.surf_faces = dec.F;
-      report_.shell_tets = true;
-    }
-  }
+  if (tets_given_) require_valid_tet_mesh(given_tets, who);
+  CaptureControlModel cm = build_capture_control_model(templ, options_.tets, options_.handles, tets_given_ ? &given_tets : nullptr);
+  report_.per_component_tets = cm.per_component;
+  report_.shell_tets = cm.shell;
+  I.tets = std::move(cm.tets);
+  I.surf_faces = std::move(cm.surface);
+  I.surf_vertex = std::move(cm.surface_vertices);
+  I.handle_vertex = std::move(cm.handles);
   I.D.setMesh(I.tets);
-  {
-    std::vector<char> on(std::size_t(I.tets.V.rows()), 0);
-    for (Eigen::Index f = 0; f < I.surf_faces.rows(); ++f)
-      for (int c = 0; c < 3; ++c) {
-        const int v = I.surf_faces(f, c);
-        if (!on[std::size_t(v)]) {
-          on[std::size_t(v)] = 1;
-          I.surf_vertex.push_back(v);
-        }
-      }
-  }
-  I.handle_vertex = farthest_point_sample(I.tets.V, I.surf_vertex, options_.handles);
   for (int v : I.handle_vertex) I.D.addVertexHandle(v, I.tets.V.row(v).transpose());
   std::vector<int> ids(I.handle_vertex.size());
   for (std::size_t h = 0; h < ids.size(); ++h) ids[h] = I.handle_vertex[h];

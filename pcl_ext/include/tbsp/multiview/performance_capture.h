@@ -162,6 +162,25 @@ struct PerformanceCaptureReport {
   int failed_frames = 0;
 };
 
+/// \brief The control model PerformanceCapture tracks with (its tets and handles, before any pose).
+struct CaptureControlModel {
+  TetMesh tets;
+  Eigen::MatrixX3i surface;            ///< control surface: faces over the tet vertices
+  std::vector<int> surface_vertices;   ///< tet vertices on it, in the order the faces first name them
+  std::vector<int> handles;            ///< `handles` farthest-point samples of surface_vertices
+  bool per_component = false;          ///< TetGen refused the whole surface: each closed part on its own
+  bool shell = false;                  ///< TetGen refused the parts too: one tetrahedron per triangle
+};
+
+/// \brief The control model of a template, as PerformanceCapture builds it: `given` tets (their
+/// boundary is the control surface), or TetGen to about `tets` tetrahedra (0: the template as
+/// is), per closed component when TetGen refuses the whole, else a shell over the template
+/// decimated to `tets` faces (a template TetGen refuses: open, or parts modelled as overlapping
+/// closed bodies; the shell's apexes are inside, so the decimated surface is the control surface);
+/// then `handles` farthest-point samples of the control surface's vertices.
+/// \throws Error when even the shell cannot be built.
+CaptureControlModel build_capture_control_model(const TriMesh& templ, int tets, int handles, const TetMesh* given = nullptr);
+
 class PerformanceCapture {
 public:
   using Ptr = std::shared_ptr<PerformanceCapture>;
