@@ -49,6 +49,46 @@ DeformationGraph::Factor::Factor(Factor&&) noexcept = default;
 DeformationGraph::Factor& DeformationGraph::Factor::operator=(Factor&&) noexcept = default;
 DeformationGraph::Factor::~Factor() = default;
 
+// Separate surface components (a body modelled as parts: limbs pushed into or set against a
+// torso, a skirt around it) share no vertex, so the edges above never join their nodes and each
+// part would be a free rigid body, held only by its correspondences (point-to-plane ones leave a
+// cylinder free to slide and spin): a leg under a skirt, matched to the skirt's points, swings
+// out with them. Parts are joined where they touch at the mesh's resolution: a vertex whose
+// nearest vertex of another component lies within the median edge length links the two
+// vertices' nearest nodes. This only adds regulariser edges: vertices stay bound to nodes of
+// their own surface (the Dijkstra binding above), so touching parts still bend apart where
+// their data say so. Parts farther apart stay independent; a single-component mesh gets no
+// edge here. O(#V log #V), only for meshes of several components.
+void DeformationGraph::link_components(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, std::vector<std::pair<int, int>>& e) {
+  cross_edges_ = 0;
+  Eigen::VectorXi comp;
+  if (F.rows() == 0 || connected_components(F, V.rows(), comp) < 2) return;
+  std::vector<double> len;
+  len.reserve(std::size_t(F.rows()) * 3);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) len.push_back((V.row(F(f, c)) - V.row(F(f, (c + 1) % 3))).norm());
+  std::nth_element(len.begin(), len.begin() + long(len.size() / 2), len.end());
+  const double touch = len[len.size() / 2];
+  const PointSearch vertex_tree(V);
+  std::vector<Eigen::Index> idx;
+  std::vector<double> d2;
+  std::vector<std::pair<int, int>> x;
+  const int knn = int(std::min<Eigen::Index>(16, V.rows()));
+  for (Eigen::Index v = 0; v < V.rows(); ++v) {
+    vertex_tree.knn(V.row(v).transpose(), knn, idx, d2);
+    for (std::size_t m = 0; m < idx.size() && std::sqrt(d2[m]) <= touch; ++m) {
+      if (comp(idx[m]) == comp(v)) continue;
+      const int p = bind_(v, 0), q = bind_(idx[m], 0);
+      if (p != q) x.push_back({std::min(p, q), std::max(p, q)});
+      break;  // the nearest vertex of another component
+    }
+  }
+  std::sort(x.begin(), x.end());
+  x.erase(std::unique(x.begin(), x.end()), x.end());
+  cross_edges_ = x.size();
+  e.insert(e.end(), x.begin(), x.end());
+}
+
 void DeformationGraph::build(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, int nodes, int k) {
   const char* who = "[tbsp::DeformationGraph::build] ";
   if (V.rows() == 0) throw InvalidInput(std::string(who) + "the mesh has no vertices");
@@ -172,6 +212,7 @@ void DeformationGraph::build(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
         const int p = bind_(v, a), q = bind_(v, b);
         if (p != q && weight_(v, a) > 0 && weight_(v, b) > 0) e.push_back({std::min(p, q), std::max(p, q)});
       }
+  link_components(V, F, e);
   std::sort(e.begin(), e.end());
   e.erase(std::unique(e.begin(), e.end()), e.end());
   edges_ = e;

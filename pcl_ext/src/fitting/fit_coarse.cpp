@@ -55,6 +55,8 @@ Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, i
   DeformationGraph graph;
   graph.build(X0, s.F, nodes, 4);
   node_count = graph.nodeCount();
+  logger()->debug("[TemplateFitting] coarse graph: {} nodes, {} edges ({} between separate parts)", node_count, graph.edges().size(),
+                  graph.crossComponentEdges());
   // samples: template vertices (not masked) and ROI cloud points
   std::vector<char> vok(std::size_t(nv), 1);
   for (std::size_t v = 0; v < s.masked.size() && v < vok.size(); ++v) vok[v] = !s.masked[v];

@@ -6,7 +6,7 @@
 ///
 /// Nodes are farthest-point samples of the mesh vertices; each vertex follows its k nearest
 /// nodes (Dijkstra distance on the edge graph, so parts that touch in space but not on the
-/// surface — two ears, a hand resting on a hip — do not drag each other) with Sumner's weights
+/// surface — two ears, a hand resting on a hip — are not bound to each other's nodes) with Sumner's weights
 /// w_j = (1 − d_j / d_{k+1})², normalised:
 ///
 ///     v' = Σ_j w_j (R_j (v − g_j) + g_j + t_j)
@@ -32,6 +32,7 @@
 
 namespace tbsp {
 
+
 class SparseCholesky;
 
 /// \brief A residual on one deformed vertex for DeformationGraph::solve().
@@ -49,6 +50,8 @@ class DeformationGraph {
   /// binds every vertex to its `k` nearest nodes by Dijkstra distance (one multi-source search
   /// keeping k + 1 labels per vertex). Transforms start at the identity. A component with fewer
   /// than k + 1 nodes binds to those; one without any node to the Euclidean nearest nodes.
+  /// Separate components that touch (within the median edge length) are joined by regulariser
+  /// edges there (crossComponentEdges()); + O(#V log #V) when the mesh has several components.
   /// O(nodes · #V + (k + 1)(#V + #E) log #V).
   /// \param nodes number of nodes, 4 ≤ nodes ≤ #V (clamped to #V).
   /// \param k nodes per vertex, 1..8 (default 4, Sumner's choice).
@@ -84,11 +87,17 @@ class DeformationGraph {
   const Eigen::MatrixX3d& nodePositions() const { return g_; }
   const std::vector<int>& nodeVertices() const { return node_vertex_; }
   const std::vector<std::pair<int, int>>& edges() const { return edges_; }
+  /// How many of edges() join nodes of separate surface components that touch (build(): a
+  /// vertex within the mesh's median edge length of another component's vertex links the two
+  /// vertices' nearest nodes), so that a body modelled as parts (limbs pushed into or set
+  /// against a torso) moves as one; 0 for a connected mesh and for parts farther apart.
+  std::size_t crossComponentEdges() const { return cross_edges_; }
   /// Current node rotations and translations.
   const std::vector<Eigen::Matrix3d>& rotations() const { return R_; }
   const std::vector<Eigen::Vector3d>& translations() const { return t_; }
 
  private:
+  void link_components(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, std::vector<std::pair<int, int>>& e);
   Eigen::MatrixX3d V_;                 // rest positions
   Eigen::MatrixX3d g_;                 // node rest positions
   std::vector<int> node_vertex_;
@@ -96,6 +105,7 @@ class DeformationGraph {
   Eigen::MatrixXi bind_;               // #V by k node indices
   Eigen::MatrixXd weight_;             // #V by k weights (rows sum to 1)
   std::vector<std::pair<int, int>> edges_;
+  std::size_t cross_edges_ = 0;        // edges between separate surface components
   std::vector<std::vector<int>> nb_;   // per node: itself and its edge neighbours, ascending
   std::vector<std::size_t> start_;     // block offsets of nb_ (CSR)
   std::vector<Eigen::Matrix3d> R_;
