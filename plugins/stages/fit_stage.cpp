@@ -24,7 +24,16 @@ public:
     const bool warm = warm_ && last_;
     const TriMesh& templ = warm ? *last_ : *in.at("template").mesh;
     FitParameters prm = params_;
-    if (warm) prm.estimate_scale = false;  // the last fit already has the scan's size
+    if (warm) {
+      // The last fit already has the scan's size and place: no global scale, no alignment, no
+      // second pass with markers taken from a first one; automatic coarse_nodes means the
+      // coarse stage's 400-node graph, which follows the limbs' swing from frame to frame
+      // (without it the fits drift: docs/pipelines.md, "Measured").
+      prm.estimate_scale = false;
+      prm.align_without_markers = false;
+      prm.auto_markers = 0;
+      if (prm.coarse_nodes == -1) prm.coarse_nodes = 400;
+    }
     TriMesh out;
     auto run = [&](auto& fit) {
       fit.setInputTemplate(templ);
@@ -75,13 +84,17 @@ void register_fit_stages(Registry& r) {
   StageInfo s{"fit", "tbsp::TemplateFitting: deforms the template onto each frame's cloud (thesis ch. 5; docs/fitting.md)"};
   s.params = {
       ParamSpec::input_path("markers", "markers JSON (docs/fit_json.md) for the first frame; without: rigid + scale alignment first", false),
-      ParamSpec::boolean("warm_start", true, "start each frame from the previous frame's fit (same connectivity)"),
+      ParamSpec::boolean("warm_start", true,
+                         "start each frame from the previous frame's fit (same connectivity; it is in place: no alignment, scale or "
+                         "second pass, the coarse stage with one 400-node graph when coarse_nodes is -1)"),
       ParamSpec::real("r_max", "0", "final match radius r_max, cloud units (0: from the data)", 0, 1e30),
       ParamSpec::integer("iterations", "15", "max iterations of the iterative fit", 1, 1000),
       ParamSpec::integer("detail_rounds", "0", "extra detail rounds after the fit", 0, 100),
       ParamSpec::integer("pull_rounds", "3", "without detail rounds: local rounds drawing in regions the fit left unexplained (0 off)", 0, 100),
-      ParamSpec::integer("coarse_nodes", "0",
-                         "coarse stage for parts turned about joints: nodes of its deformation graph (400 measured; 0 off, else >= 4)", 0, 20000),
+      ParamSpec::integer("coarse_nodes", "-1",
+                         "coarse stage for parts turned about joints: nodes of its deformation graph (-1 automatic as in tbsp fit: 400 "
+                         "without markers, with markers the fits without and with it compared; 0 off; else >= 4, 400 measured)",
+                         -1, 20000),
       ParamSpec::boolean("estimate_scale", true, "estimate a global scale on the first frame (§5.2)"),
       ParamSpec::boolean("refine_rotations", false, "re-estimate the rotation field from the fit")};
   s.inputs = {{"cloud", DataType::Cloud, "the scan of this frame"},

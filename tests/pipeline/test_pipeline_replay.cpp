@@ -139,12 +139,13 @@ TEST(PipelineReplay, StudioRangeScansFitEveryFrameWarmStarted) {
     EXPECT_EQ(rep["frames"][f]["numbers"]["fit"]["warm_start"].get<double>(), f > 0 ? 1.0 : 0.0);
     EXPECT_EQ(rep["frames"][f]["numbers"]["fit"]["unexplained_regions"].get<double>(), 0.0);  // every frame's scans explained
   }
-  // The fit's result moves with the rounding of the BLAS kernels (a matching decision flips and
-  // the fit stops at another iteration; docs/pipelines.md): over OpenBLAS's Haswell, SkylakeX,
-  // Sandybridge and Zen kernels the frames measured 0.32-0.62 %, medians 0.42-0.54 %.
+  // The first frame as tbsp fit fits a template without markers, the later ones from the last
+  // fit with the coarse stage (docs/pipelines.md): over OpenBLAS's Haswell, SkylakeX,
+  // Sandybridge and Zen kernels the frames measured 0.30-0.37 % (without the coarse stage the
+  // fits drift, 0.34-0.74 %).
   std::sort(dist.begin(), dist.end());
-  EXPECT_LT(0.5 * (dist[2] + dist[3]), 0.007);
-  EXPECT_LT(dist.back(), 0.01);
+  EXPECT_LT(0.5 * (dist[2] + dist[3]), 0.005);
+  EXPECT_LT(dist.back(), 0.006);
   // a warm-started pipeline cannot split its frames over threads
   RunOptions two;
   two.threads = 2;
