@@ -32,7 +32,6 @@
 
 namespace tbsp {
 
-
 class SparseCholesky;
 
 /// \brief A residual on one deformed vertex for DeformationGraph::solve().
