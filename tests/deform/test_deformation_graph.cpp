@@ -86,8 +86,11 @@ TEST(DeformationGraph, PointToPlaneConstraintsLeaveTheTangentFree) {
 }
 
 namespace {
-// Two 20 x 20 grids of 1 m (edges 5 cm), the second `gap` above the first: two components.
-TriMesh two_sheets(double gap) {
+// Two 20 x 20 grids of 1 m (edges 5 cm), the second `gap` above the first (two components),
+// deformed by a graph of 80 nodes: the top sheet pulled up by 0.2 m, the bottom sheet held in
+// place (`hold_bottom`) or left free; `steps` Gauss-Newton steps at stiffness `alpha`. Returns
+// each vertex's rise; `cross` gets the graph's edges between the sheets.
+std::vector<double> pull_top_sheet(double gap, bool hold_bottom, double alpha, int steps, std::size_t* cross = nullptr) {
   TriMesh a = make_grid(20, 20, 1.0, 1.0), b = a;
   b.V.col(2).array() += gap;
   TriMesh m;
@@ -95,7 +98,20 @@ TriMesh two_sheets(double gap) {
   m.V << a.V, b.V;
   m.F.resize(a.F.rows() * 2, 3);
   m.F << a.F, (b.F.array() + int(a.V.rows())).matrix();
-  return m;
+  DeformationGraph g;
+  g.build(m.V, m.F, 80);
+  if (cross) *cross = g.crossComponentEdges();
+  std::vector<GraphConstraint> c;
+  for (Eigen::Index v = 0; v < m.V.rows(); v += 2) {
+    const bool top = v >= a.V.rows();
+    if (top || hold_bottom)
+      c.push_back({int(v), m.V.row(v).transpose() + Eigen::Vector3d(0, 0, top ? 0.2 : 0.0), Eigen::Vector3d::Zero(), 1.0});
+  }
+  for (int it = 0; it < steps; ++it) g.solve(c, alpha);
+  const Eigen::MatrixX3d X = g.deform();
+  std::vector<double> rise;
+  for (Eigen::Index v = 0; v < m.V.rows(); ++v) rise.push_back(X(v, 2) - m.V(v, 2));
+  return rise;
 }
 }  // namespace
 
@@ -104,20 +120,11 @@ TEST(DeformationGraph, SeparateSurfacesAreBoundToTheirOwnNodes) {
   // its own target exactly when they lie apart, and within 1 mm when they touch (2 mm apart:
   // then joined by soft regulariser edges only, which a small stiffness lets bend).
   for (const double gap : {0.3, 0.002}) {
-    const TriMesh m = two_sheets(gap);
-    const Eigen::Index half = m.V.rows() / 2;
-    DeformationGraph g;
-    g.build(m.V, m.F, 80);
-    EXPECT_EQ(g.crossComponentEdges() > 0, gap < 0.05) << gap;
-    std::vector<GraphConstraint> c;
-    for (Eigen::Index v = 0; v < m.V.rows(); v += 2) {
-      const bool top = v >= half;
-      c.push_back({int(v), m.V.row(v).transpose() + (top ? Eigen::Vector3d(0, 0, 0.2) : Eigen::Vector3d::Zero()), Eigen::Vector3d::Zero(), 1.0});
-    }
-    for (int it = 0; it < 5; ++it) g.solve(c, gap < 0.05 ? 1e-5 : 1.0);
-    const Eigen::MatrixX3d X = g.deform();
-    for (Eigen::Index v = 0; v < m.V.rows(); ++v)
-      EXPECT_NEAR(X(v, 2) - m.V(v, 2), v >= half ? 0.2 : 0.0, gap < 0.05 ? 1e-3 : 1e-6) << gap << " " << v;
+    std::size_t cross = 0;
+    const std::vector<double> rise = pull_top_sheet(gap, true, gap < 0.05 ? 1e-5 : 1.0, 5, &cross);
+    EXPECT_EQ(cross > 0, gap < 0.05) << gap;
+    const std::size_t half = rise.size() / 2;
+    for (std::size_t v = 0; v < rise.size(); ++v) EXPECT_NEAR(rise[v], v >= half ? 0.2 : 0.0, gap < 0.05 ? 1e-3 : 1e-6) << gap << " " << v;
   }
 }
 
@@ -126,16 +133,8 @@ TEST(DeformationGraph, PartsThatTouchMoveTogetherPartsApartDoNot) {
   // bottom sheet is joined to it by regulariser edges and follows as one part; 0.3 m apart it is
   // a separate part with nothing to move it.
   for (const double gap : {0.002, 0.3}) {
-    const TriMesh m = two_sheets(gap);
-    const Eigen::Index half = m.V.rows() / 2;
-    DeformationGraph g;
-    g.build(m.V, m.F, 80);
-    std::vector<GraphConstraint> c;
-    for (Eigen::Index v = half; v < m.V.rows(); ++v)
-      c.push_back({int(v), m.V.row(v).transpose() + Eigen::Vector3d(0, 0, 0.2), Eigen::Vector3d::Zero(), 1.0});
-    for (int it = 0; it < 10; ++it) g.solve(c, 1.0);
-    const Eigen::MatrixX3d X = g.deform();
-    for (Eigen::Index v = 0; v < half; ++v) EXPECT_NEAR(X(v, 2) - m.V(v, 2), gap < 0.05 ? 0.2 : 0.0, 1e-3) << gap << " " << v;
+    const std::vector<double> rise = pull_top_sheet(gap, false, 1.0, 10);
+    for (std::size_t v = 0; v < rise.size() / 2; ++v) EXPECT_NEAR(rise[v], gap < 0.05 ? 0.2 : 0.0, 1e-3) << gap << " " << v;
   }
 }
 
