@@ -468,7 +468,9 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     else std::snprintf(buf, sizeof buf, ", %.4g with a %d-node graph first", scores[h], prepass[h]);
     msg += buf;
   }
-  rep.message += msg + "; hypothesis " + std::to_string(kept + 1) + " kept. ";
+  if (kept == 0) std::snprintf(buf, sizeof buf, "; kept: the %d-node graph alone. ", params.coarse_nodes);
+  else std::snprintf(buf, sizeof buf, "; kept: a %d-node graph first. ", prepass[kept]);
+  rep.message += msg + buf;
   rep.t_total = seconds_since(t_all);
   return rep;
 }
