@@ -3,6 +3,7 @@
 #include "tbsp/deform/deformation_graph.h"
 
 #include <Eigen/Geometry>
+#include <Eigen/SVD>
 #include <Eigen/SparseCore>
 #include <algorithm>
 #include <cmath>
@@ -229,6 +230,47 @@ void DeformationGraph::build(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& 
 void DeformationGraph::reset() {
   R_.assign(std::size_t(g_.rows()), Eigen::Matrix3d::Identity());
   t_.assign(std::size_t(g_.rows()), Eigen::Vector3d::Zero());
+}
+
+void DeformationGraph::fitTransformsTo(const Eigen::MatrixX3d& X) {
+  const char* who = "[tbsp::DeformationGraph::fitTransformsTo] ";
+  if (g_.rows() == 0) throw InvalidInput(std::string(who) + "call build() first");
+  if (X.rows() != V_.rows())
+    throw InvalidInput(std::string(who) + "X has " + std::to_string(X.rows()) + " rows for the graph's " + std::to_string(V_.rows()) +
+                       " vertices");
+  if (!X.allFinite()) throw InvalidInput(std::string(who) + "X has a non-finite coordinate");
+  const std::size_t n = std::size_t(g_.rows());
+  std::vector<double> wsum(n, 0.0);
+  std::vector<Eigen::Vector3d> cr(n, Eigen::Vector3d::Zero()), cx(n, Eigen::Vector3d::Zero());
+  for (Eigen::Index v = 0; v < V_.rows(); ++v)
+    for (int m = 0; m < k_; ++m) {
+      const std::size_t j = std::size_t(bind_(v, m));
+      const double w = weight_(v, m);
+      wsum[j] += w;
+      cr[j] += w * V_.row(v).transpose();
+      cx[j] += w * X.row(v).transpose();
+    }
+  std::vector<Eigen::Matrix3d> H(n, Eigen::Matrix3d::Zero());
+  for (std::size_t j = 0; j < n; ++j)
+    if (wsum[j] > 0) {
+      cr[j] /= wsum[j];
+      cx[j] /= wsum[j];
+    }
+  for (Eigen::Index v = 0; v < V_.rows(); ++v)
+    for (int m = 0; m < k_; ++m) {
+      const std::size_t j = std::size_t(bind_(v, m));
+      H[j] += weight_(v, m) * (V_.row(v).transpose() - cr[j]) * (X.row(v).transpose() - cx[j]).transpose();
+    }
+  reset();
+  for (std::size_t j = 0; j < n; ++j) {
+    if (!(wsum[j] > 0)) continue;  // a node no vertex follows: identity
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H[j], Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+    if ((svd.matrixV() * svd.matrixU().transpose()).determinant() < 0) D(2, 2) = -1;
+    R_[j] = svd.matrixV() * D * svd.matrixU().transpose();
+    const Eigen::Vector3d g = g_.row(Eigen::Index(j)).transpose();
+    t_[j] = cx[j] - g - R_[j] * (cr[j] - g);
+  }
 }
 
 Eigen::Vector3d DeformationGraph::deformVertex(int v) const {

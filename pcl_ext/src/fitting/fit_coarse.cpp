@@ -15,6 +15,7 @@
 // template's detail as the graph turned it. (Steering the template's δ by the graph's
 // rotations instead was measured worse: 45° bunny, clean Hausdorff 1.22 % against 0.59 %, the
 // compressed inner side of a bend springs back; docs/dev/fitting_experiments.md.)
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <vector>
@@ -24,6 +25,7 @@
 #include "tbsp/core/timer.h"
 #include "tbsp/deform/deformation_graph.h"
 #include "tbsp/mesh/point_normals.h"
+#include "tbsp/mesh/topology.h"
 
 namespace tbsp {
 namespace fit_impl {
@@ -50,10 +52,15 @@ struct Pair {
 // returns the deformed template (all vertices), adds the Gauss-Newton steps to `steps_run` and
 // sets `node_count` to the graph's nodes. Progress from `lo` to `hi` over the rounds (a stop
 // asked for through it is seen within one step).
-Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, int& steps_run, int& node_count, double lo, double hi) {
+// With `rest` (#V rows), the graph is built on that shape instead (its rigidity is measured
+// against it) and starts with the transforms that carry it onto X0 (fitTransformsTo); only the
+// rounds from `first_round` on run.
+Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, int& steps_run, int& node_count, double lo, double hi,
+                           const Eigen::MatrixX3d* rest = nullptr, int first_round = 0) {
   const Eigen::Index nv = X0.rows();
   DeformationGraph graph;
-  graph.build(X0, s.F, nodes, 4);
+  graph.build(rest ? *rest : X0, s.F, nodes, 4);
+  if (rest) graph.fitTransformsTo(X0);
   node_count = graph.nodeCount();
   logger()->debug("[TemplateFitting] coarse graph: {} nodes, {} edges ({} between separate parts)", node_count, graph.edges().size(),
                   graph.crossComponentEdges());
@@ -69,9 +76,15 @@ Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, i
   const double tol = 1e-3 * s.cloud.diag;  // a round ends when the graph moves less (measured: same fit as 1e-4, 40 % fewer steps)
   // the iterations need the sampled vertices only: their positions, and normals turned by the
   // graph (the blended node rotations applied to the rest normal); all vertices at the end
-  const Eigen::MatrixX3d N0 = vertex_normals(X0, s.F);
+  const Eigen::MatrixX3d N0 = vertex_normals(rest ? *rest : X0, s.F);
+  // on a graph built on another rest shape, a surface component without data or markers is not
+  // at rest (its start transforms reproduce X0 only up to the blending) and nothing anchors it:
+  // its sampled vertices are held at X0 (a component that keeps no constraint could otherwise
+  // turn as a whole)
+  Eigen::VectorXi component;
+  const int n_components = rest ? connected_components(s.F, nv, component) : 0;
   Eigen::MatrixX3d Xs(Eigen::Index(vs.size()), 3), Ns(Eigen::Index(vs.size()), 3);
-  for (int round = 0; round < rounds; ++round) {
+  for (int round = first_round; round < rounds; ++round) {
     const double f = rounds > 1 ? double(round) / (rounds - 1) : 1.0;
     const double radius = r_start * std::pow(r_end / r_start, f);
     const double stiff = a_start * std::pow(a_end / a_start, f);
@@ -128,6 +141,12 @@ Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, i
       const double wm = s.u.marker_weight * std::max(1.0, n_data) / std::max(1, graph.nodeCount());
       for (std::size_t m = 0; m < s.mverts.size() && m < s.mtarget.size(); ++m)
         cons.push_back({s.mverts[m], s.mtarget[m], Eigen::Vector3d::Zero(), wm * s.markers[m].weight});
+      if (n_components > 0) {
+        std::vector<char> held(std::size_t(n_components), 0);
+        for (const GraphConstraint& c : cons) held[std::size_t(component(c.vertex))] = 1;
+        for (Eigen::Index v : vs)
+          if (!held[std::size_t(component(v))]) cons.push_back({int(v), X0.row(v).transpose(), Eigen::Vector3d::Zero(), 1.0});
+      }
       const double alpha = stiff * std::max(1.0, n_data) / std::max<std::size_t>(1, 2 * graph.edges().size());
       const double move = graph.solve(cons, alpha, 1);
       ++steps_run;
@@ -152,7 +171,22 @@ void coarse_stage(FitState& s) {
     X = fit_graph(s, X, s.coarse_prepass, steps_run, nodes, 0.08, 0.09);
     rep.coarse_prepass_nodes = nodes;
   }
-  X = fit_graph(s, X, s.u.coarse_nodes, steps_run, nodes, s.coarse_prepass > 0 ? 0.09 : 0.08, 0.1);
+  const bool second_half = s.posed_by_field && s.coarse_prepass <= 0 && s.u.coarse_rounds > 1;
+  X = fit_graph(s, X, s.u.coarse_nodes, steps_run, nodes, s.coarse_prepass > 0 ? 0.09 : 0.08, second_half ? 0.095 : 0.1);
+  if (second_half) {
+    // The markers posed the template with the rotation field, and the graph above measured its
+    // rigidity against that pose: where few markers sit on a part (a forearm), the field's pose
+    // is distorted, and the graph kept the distortion as its rest. So the second half of the
+    // rounds runs again on a graph built on the template itself (scaled by stage 1's λ, rigidly
+    // aligned to the shape so far; its transforms start at that shape): rigid against the
+    // template's own shape where the data leave the shape open (measured: articulated Armadillo
+    // at 45°, clean Hausdorff 0.80–1.28 → 0.30–0.52 %; a hole that swallows a bent limb keeps
+    // the limb less bent; docs/dev/fitting_experiments.md 2026-12-07 (12)).
+    const Eigen::MatrixX3d scaled = s.rep.scale * s.templ().V;
+    const Eigen::Matrix4d T = Eigen::umeyama(scaled.transpose(), X.transpose(), false);
+    const Eigen::MatrixX3d rest = (scaled * T.topLeftCorner<3, 3>().transpose()).rowwise() + T.topRightCorner<3, 1>().transpose();
+    X = fit_graph(s, X, s.u.coarse_nodes, steps_run, nodes, 0.095, 0.1, &rest, (s.u.coarse_rounds + 1) / 2);
+  }
   // the later stages refine the coarse shape: it becomes their rest shape (its Laplacian
   // coordinates carry the template's detail as the graph turned it), at scale 1, no rotations
   s.coarse.V = X;

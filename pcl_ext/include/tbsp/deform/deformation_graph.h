@@ -80,6 +80,13 @@ class DeformationGraph {
 
   /// \brief Back to the identity transforms.
   void reset();
+  /// \brief Transforms that carry the rest shape onto the positions X (#V rows, the build()
+  /// vertices in order): per node, the rigid transform (Kabsch) that best maps its bound
+  /// vertices' rest positions onto X, weighted by their binding weights. deform() then
+  /// reproduces X up to what rigid pieces blended smoothly can express: a start pose for
+  /// solve() that keeps the rest shape as the regulariser's reference. O(k #V).
+  /// \throws InvalidInput before build() or when X has the wrong number of rows or is not finite.
+  void fitTransformsTo(const Eigen::MatrixX3d& X);
 
   int nodeCount() const { return int(g_.rows()); }
   /// Node positions g_j in the rest pose (rows), their mesh vertices, the node edges (j < l).
