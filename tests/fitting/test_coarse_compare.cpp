@@ -126,7 +126,7 @@ TEST(CoarseCompare, TheTurnedHumansHandsComeBackWithTheCoarseStage) {
   std::printf("  human 45 deg: clean Hausdorff %.3f%% (without the coarse stage %.3f%%), %lld / %lld points beyond r_max\n",
               100 * e.hausdorff_clean_rel, 100 * e_off.hausdorff_clean_rel, static_cast<long long>(ra.coarse_far_points[0]),
               static_cast<long long>(ra.coarse_far_points[1]));
-  EXPECT_LE(e.hausdorff_clean_rel, 0.009);       // measured 0.639 %
+  EXPECT_LE(e.hausdorff_clean_rel, 0.009);       // measured 0.547 % (0.639 % before the coarse stage's second half)
   EXPECT_GE(e_off.hausdorff_clean_rel, 0.012);   // measured 1.548 %
   const int threads = omp_get_max_threads();
   omp_set_num_threads(1);
