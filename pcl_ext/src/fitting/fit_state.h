@@ -75,8 +75,8 @@ struct FitState {
       : markers(o.markers), progress(p), rep(r), status(st), u(r.used), cloud(o.cloud), N(o.N), orient(o.orient),
         cos_max(o.cos_max), mtarget(o.mtarget), mverts(o.mverts), masked(o.masked), V(o.V), V0(o.V0), F(o.F),
         matched(o.matched), target(o.target), prop_ids(o.prop_ids), propagation_handled(o.propagation_handled),
-        coarse(o.coarse), roi_dist(o.roi_dist), coarse_prepass(o.coarse_prepass), posed_by_field(o.posed_by_field), alignment_cache(o.alignment_cache),
-        templ_(o.templ_), NC_(o.NC_), nc_ready_(o.nc_ready_) {
+        coarse(o.coarse), roi_dist(o.roi_dist), coarse_prepass(o.coarse_prepass), posed_by_field(o.posed_by_field),
+        alignment_cache(o.alignment_cache), templ_(o.templ_), NC_(o.NC_), nc_ready_(o.nc_ready_) {
     D.copySolverAnalysis(o.D);
   }
 
