@@ -171,12 +171,13 @@ void coarse_stage(FitState& s) {
     X = fit_graph(s, X, s.coarse_prepass, steps_run, nodes, 0.08, 0.09);
     rep.coarse_prepass_nodes = nodes;
   }
-  const bool second_half = s.posed_by_field && s.coarse_prepass <= 0 && s.u.coarse_rounds > 1;
+  const bool second_half = !s.markers.empty() && !s.markers_from_fit && s.u.coarse_rounds > 1;
   X = fit_graph(s, X, s.u.coarse_nodes, steps_run, nodes, s.coarse_prepass > 0 ? 0.09 : 0.08, second_half ? 0.095 : 0.1);
   if (second_half) {
-    // The markers posed the template with the rotation field, and the graph above measured its
-    // rigidity against that pose: where few markers sit on a part (a forearm), the field's pose
-    // is distorted, and the graph kept the distortion as its rest. So the second half of the
+    // The user's markers posed the template (stage 1), and the graph above measured its
+    // rigidity against that pose: where few markers sit on a part (a forearm), the pose is
+    // distorted (more so without the rotation field), and the graph kept the distortion as its
+    // rest. So the second half of the
     // rounds runs again on a graph built on the template itself (scaled by stage 1's λ, rigidly
     // aligned to the shape so far; its transforms start at that shape): rigid against the
     // template's own shape where the data leave the shape open (measured: articulated Armadillo

@@ -110,8 +110,7 @@ void initial_pose(FitState& s) {
   t0 = Clock::now();
   rep.scale = s.u.estimate_scale ? estimate_scale(s) : 1.0;
   rep.t_scale = seconds_since(t0);
-  s.posed_by_field = !s.D.lastRotations().empty();
-  if (s.posed_by_field) s.D.setRotations(s.D.lastRotations());  // freeze the field
+  if (!s.D.lastRotations().empty()) s.D.setRotations(s.D.lastRotations());  // freeze the field
   s.V0 = s.V;
   s.F = s.templ().F;
 }

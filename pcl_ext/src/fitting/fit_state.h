@@ -75,7 +75,7 @@ struct FitState {
       : markers(o.markers), progress(p), rep(r), status(st), u(r.used), cloud(o.cloud), N(o.N), orient(o.orient),
         cos_max(o.cos_max), mtarget(o.mtarget), mverts(o.mverts), masked(o.masked), V(o.V), V0(o.V0), F(o.F),
         matched(o.matched), target(o.target), prop_ids(o.prop_ids), propagation_handled(o.propagation_handled),
-        coarse(o.coarse), roi_dist(o.roi_dist), coarse_prepass(o.coarse_prepass), posed_by_field(o.posed_by_field),
+        coarse(o.coarse), roi_dist(o.roi_dist), coarse_prepass(o.coarse_prepass), markers_from_fit(o.markers_from_fit),
         alignment_cache(o.alignment_cache), templ_(o.templ_), NC_(o.NC_), nc_ready_(o.nc_ready_) {
     D.copySolverAnalysis(o.D);
   }
@@ -113,8 +113,9 @@ struct FitState {
   /// nodes of a coarser graph the coarse stage fits first (the later hypotheses of a fit
   /// without markers, FitParameters::coarse_prepass_nodes); 0: the coarse_nodes graph alone
   int coarse_prepass = 0;
-  /// stage 1 posed the template with the marker rotation field (its rotations turn δ)
-  bool posed_by_field = false;
+  /// the markers are the matched vertices of an aligned first pass (the second pass of a fit
+  /// without markers), not the user's
+  bool markers_from_fit = false;
   /// The similarity alignment of a fit without markers, shared by the passes and hypotheses of
   /// one fit_template call (they align the same template to the same cloud): empty until the
   /// first computes it; nullptr: not shared.

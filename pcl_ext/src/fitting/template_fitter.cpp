@@ -51,7 +51,7 @@ class FitRun {
 public:
   FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const std::vector<FitMarker>& markers,
          const RegionOfInterest& roi, const FitParameters& params, ProgressCallback progress, bool orient_normals, int coarse_prepass,
-         SharedWork* shared = nullptr);
+         SharedWork* shared = nullptr, bool markers_from_fit = false);
   /// A second fit from `from`'s state after its constructor (before fitStages), with
   /// `coarse_nodes` instead of from's (the only parameter the stages before it do not read).
   /// It reads from's cloud when that is not shared: `from` must then outlive it.
@@ -84,7 +84,7 @@ private:
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                    const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                    TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                   bool orient_normals, int coarse_prepass, SharedWork* shared = nullptr);
+                   bool orient_normals, int coarse_prepass, SharedWork* shared = nullptr, bool markers_from_fit = false);
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
                          bool orient_normals, int coarse_prepass, SharedWork& shared);
@@ -506,7 +506,7 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
     auto_markers.push_back(m);
   }
   FitReport rep = fit_once(templ, P_in, N_in, auto_markers, roi, params, result, status, sub_progress(progress, 0.4, 1.0), orient_normals,
-                           coarse_prepass, &shared);
+                           coarse_prepass, &shared, true);
   rep.aligned_without_markers = true;
   rep.alignment = rep1.alignment;
   rep.alignment_rotation_deg = rep1.alignment_rotation_deg;
@@ -523,7 +523,7 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
 
 FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const std::vector<FitMarker>& markers,
                const RegionOfInterest& roi, const FitParameters& params, ProgressCallback progress, bool orient_normals,
-               int coarse_prepass, SharedWork* shared)
+               int coarse_prepass, SharedWork* shared, bool markers_from_fit)
     : t_all_(Clock::now()), blas_threads_(1), progress_(std::move(progress)) {
   // (one BLAS thread: no contention with our OpenMP loops, blas_threads.h)
   check_fit_inputs(templ, P_in, N_in, params);
@@ -533,6 +533,7 @@ FitRun::FitRun(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::
   s_ = std::make_unique<fit_impl::FitState>(templ, markers, progress_, rep_, status_, *cloud);
   fit_impl::FitState& s = *s_;
   s.coarse_prepass = coarse_prepass;
+  s.markers_from_fit = markers_from_fit;
   s.alignment_cache = shared ? &shared->alignment : nullptr;
   fit_impl::use_cloud(s, params, orient_normals);
   fit_impl::prepare_markers(s, P_in, roi);
@@ -597,8 +598,8 @@ FitReport FitRun::finish(TriMesh& result, std::vector<VertexStatus>& status) {
 FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in,
                    const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                    TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                   bool orient_normals, int coarse_prepass, SharedWork* shared) {
-  FitRun run(templ, P_in, N_in, markers, roi, params, progress, orient_normals, coarse_prepass, shared);
+                   bool orient_normals, int coarse_prepass, SharedWork* shared, bool markers_from_fit) {
+  FitRun run(templ, P_in, N_in, markers, roi, params, progress, orient_normals, coarse_prepass, shared, markers_from_fit);
   return run.finish(result, status);
 }
 
