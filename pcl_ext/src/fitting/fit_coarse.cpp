@@ -177,12 +177,12 @@ void coarse_stage(FitState& s) {
     // The user's markers posed the template (stage 1), and the graph above measured its
     // rigidity against that pose: where few markers sit on a part (a forearm), the pose is
     // distorted (more so without the rotation field), and the graph kept the distortion as its
-    // rest. So the second half of the
-    // rounds runs again on a graph built on the template itself (scaled by stage 1's λ, rigidly
-    // aligned to the shape so far; its transforms start at that shape): rigid against the
-    // template's own shape where the data leave the shape open (measured: articulated Armadillo
-    // at 45°, clean Hausdorff 0.80–1.28 → 0.30–0.52 %; a hole that swallows a bent limb keeps
-    // the limb less bent; docs/dev/fitting_experiments.md 2026-12-07 (12)).
+    // rest. So the second half of the rounds runs again on a graph built on the template itself
+    // (scaled by stage 1's λ, rigidly aligned to the shape so far; its transforms start at that
+    // shape): rigid against the template's own shape where the data leave the shape open
+    // (measured: articulated Armadillo at 45°, clean Hausdorff 0.80–1.28 → 0.30–0.52 %; a hole
+    // that swallows a bent limb keeps the limb less bent; docs/dev/fitting_experiments.md
+    // 2026-12-07 (12)).
     const Eigen::MatrixX3d scaled = s.rep.scale * s.templ().V;
     const Eigen::Matrix4d T = Eigen::umeyama(scaled.transpose(), X.transpose(), false);
     const Eigen::MatrixX3d rest = (scaled * T.topLeftCorner<3, 3>().transpose()).rowwise() + T.topRightCorner<3, 1>().transpose();
