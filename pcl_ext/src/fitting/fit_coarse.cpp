@@ -18,6 +18,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <string>
 #include <vector>
 
 #include "fit_state.h"
@@ -62,8 +63,10 @@ Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, i
   graph.build(rest ? *rest : X0, s.F, nodes, 4);
   if (rest) graph.fitTransformsTo(X0);
   node_count = graph.nodeCount();
-  logger()->debug("[TemplateFitting] coarse graph: {} nodes, {} edges ({} between separate parts)", node_count, graph.edges().size(),
-                  graph.crossComponentEdges());
+  logger()->debug("[TemplateFitting] coarse graph{}: {} nodes, {} edges ({} between separate parts)",
+                  rest ? " on the template (rounds " + std::to_string(first_round + 1) + "-" + std::to_string(s.u.coarse_rounds) + " again)"
+                       : std::string(),
+                  node_count, graph.edges().size(), graph.crossComponentEdges());
   // samples: template vertices (not masked) and ROI cloud points
   std::vector<char> vok(std::size_t(nv), 1);
   for (std::size_t v = 0; v < s.masked.size() && v < vok.size(); ++v) vok[v] = !s.masked[v];
