@@ -59,14 +59,16 @@ struct Pair {
 Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, int& steps_run, int& node_count, double lo, double hi,
                            const Eigen::MatrixX3d* rest = nullptr, int first_round = 0) {
   const Eigen::Index nv = X0.rows();
+  const Eigen::MatrixX3d& base = rest ? *rest : X0;  // the shape the graph is built on
   DeformationGraph graph;
-  graph.build(rest ? *rest : X0, s.F, nodes, 4);
+  graph.build(base, s.F, nodes, 4);
   if (rest) graph.fitTransformsTo(X0);
   node_count = graph.nodeCount();
-  logger()->debug("[TemplateFitting] coarse graph{}: {} nodes, {} edges ({} between separate parts)",
-                  rest ? " on the template (rounds " + std::to_string(first_round + 1) + "-" + std::to_string(s.u.coarse_rounds) + " again)"
-                       : std::string(),
-                  node_count, graph.edges().size(), graph.crossComponentEdges());
+  if (logger()->should_log(spdlog::level::debug))
+    logger()->debug("[TemplateFitting] coarse graph{}: {} nodes, {} edges ({} between separate parts)",
+                    rest ? " on the template (rounds " + std::to_string(first_round + 1) + "-" + std::to_string(s.u.coarse_rounds) + " again)"
+                         : std::string(),
+                    node_count, graph.edges().size(), graph.crossComponentEdges());
   // samples: template vertices (not masked) and ROI cloud points
   std::vector<char> vok(std::size_t(nv), 1);
   for (std::size_t v = 0; v < s.masked.size() && v < vok.size(); ++v) vok[v] = !s.masked[v];
@@ -79,7 +81,7 @@ Eigen::MatrixX3d fit_graph(FitState& s, const Eigen::MatrixX3d& X0, int nodes, i
   const double tol = 1e-3 * s.cloud.diag;  // a round ends when the graph moves less (measured: same fit as 1e-4, 40 % fewer steps)
   // the iterations need the sampled vertices only: their positions, and normals turned by the
   // graph (the blended node rotations applied to the rest normal); all vertices at the end
-  const Eigen::MatrixX3d N0 = vertex_normals(rest ? *rest : X0, s.F);
+  const Eigen::MatrixX3d N0 = vertex_normals(base, s.F);
   // on a graph built on another rest shape, a surface component without data or markers is not
   // at rest (its start transforms reproduce X0 only up to the blending) and nothing anchors it:
   // its sampled vertices are held at X0 (a component that keeps no constraint could otherwise
