@@ -177,7 +177,8 @@ void add_fit_commands(CLI::App& app, CommandTable& table) {
                    "more hypothesis; the fit closest to the scan is kept (default 100,200; 0 = one hypothesis)")
       ->delimiter(',');
   fitc->add_option("--detail-rounds", a->p.detail_rounds,
-                   "rounds of Laplacian updating after the fit, unsupported vertices held (sharper protrusions; 0 = off)");
+                   "rounds of Laplacian updating after the fit, unsupported vertices held (sharper protrusions; default -1: 4 on "
+                   "templates of at most 20,000 vertices, else 0; 0 = off)");
   fitc->add_option("--pull-rounds", a->p.pull_rounds,
                    "without detail rounds: rounds that move only the vertices near regions of the cloud the fit left "
                    "unexplained, towards those points (default 3; 0 = off)");

@@ -89,7 +89,7 @@ void register_fit_stages(Registry& r) {
                          "second pass, the coarse stage with one 400-node graph when coarse_nodes is -1)"),
       ParamSpec::real("r_max", "0", "final match radius r_max, cloud units (0: from the data)", 0, 1e30),
       ParamSpec::integer("iterations", "15", "max iterations of the iterative fit", 1, 1000),
-      ParamSpec::integer("detail_rounds", "0", "extra detail rounds after the fit", 0, 100),
+      ParamSpec::integer("detail_rounds", "-1", "detail rounds after the fit (-1 automatic as in tbsp fit: 4 on templates of at most 20,000 vertices, else none; 0 off)", -1, 100),
       ParamSpec::integer("pull_rounds", "3", "without detail rounds: local rounds drawing in regions the fit left unexplained (0 off)", 0, 100),
       ParamSpec::integer("coarse_nodes", "-1",
                          "coarse stage for parts turned about joints: nodes of its deformation graph (-1 automatic as in tbsp fit: 400 "

@@ -210,7 +210,7 @@ TEST(TemplateFittingBadInput, ClearErrors) {
   EXPECT_THROW(fit.setParameters(p), InvalidInput);
   for (auto bad : {+[](FitParameters& q) { q.radius_steps = -1; }, +[](FitParameters& q) { q.freeze_iteration = -2; },
                    +[](FitParameters& q) { q.relaxation = 0.5; }, +[](FitParameters& q) { q.relaxation = 2.0; },
-                   +[](FitParameters& q) { q.detail_rounds = -1; }, +[](FitParameters& q) { q.detail_iterations = 0; },
+                   +[](FitParameters& q) { q.detail_rounds = -2; }, +[](FitParameters& q) { q.detail_iterations = 0; },
                    +[](FitParameters& q) { q.detail_weight = 0; }, +[](FitParameters& q) { q.detail_marker_weight = 0; },
                    +[](FitParameters& q) { q.detail_radius_factor = 0.1; }, +[](FitParameters& q) { q.detail_radius_factor = NAN; },
                    +[](FitParameters& q) { q.detail_normal_angle_deg = 0; }, +[](FitParameters& q) { q.detail_tolerance = -1; },

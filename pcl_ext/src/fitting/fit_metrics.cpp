@@ -116,6 +116,17 @@ const RoiDistances& roi_distances(FitState& s) {
   return r;
 }
 
+double tail_mean(const Eigen::VectorXd& d) {
+  if (d.size() == 0) return 0;
+  std::vector<double> sorted(d.data(), d.data() + d.size());
+  const std::size_t k = std::max<std::size_t>(1, sorted.size() / 100);
+  std::nth_element(sorted.begin(), sorted.end() - std::ptrdiff_t(k), sorted.end());
+  std::sort(sorted.end() - std::ptrdiff_t(k), sorted.end());  // one summation order
+  double tail = 0;
+  for (auto it = sorted.end() - std::ptrdiff_t(k); it != sorted.end(); ++it) tail += *it;
+  return tail / double(k);
+}
+
 void compute_metrics(FitState& s, int known_crossings) {
   FitReport& rep = s.rep;
   const FitParameters& u = s.u;
@@ -137,13 +148,7 @@ void compute_metrics(FitState& s, int known_crossings) {
     const auto i99 = sorted.begin() + long(0.99 * double(nq - 1));
     std::nth_element(sorted.begin(), i99, sorted.end());
     rep.p99 = *i99;
-    // the largest 1 % (at least one) lie at or right of the p99 element after the partition above
-    const std::size_t k = std::max<std::size_t>(1, std::size_t(nq) / 100);
-    std::nth_element(i99, sorted.end() - std::ptrdiff_t(k), sorted.end());
-    std::sort(sorted.end() - std::ptrdiff_t(k), sorted.end());  // one summation order
-    double tail = 0;
-    for (auto it = sorted.end() - std::ptrdiff_t(k); it != sorted.end(); ++it) tail += *it;
-    rep.tail_mean = tail / double(k);
+    rep.tail_mean = tail_mean(dist);
     rep.coverage_points = double((dist.array() <= u.max_match_distance).count()) / double(nq);
     rep.unexplained = unexplained_regions(Q, dist, diag, u.max_match_distance);
     // fold-overs: face normal against the cloud normals near the face centre. Estimated normals

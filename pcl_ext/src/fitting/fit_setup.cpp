@@ -214,7 +214,7 @@ bool FitParameters::isValid(std::string* why) const {
   if (!(subdivision_error >= 0)) return bad("subdivision_error must be >= 0 (0 = automatic)");
   if (!(fairing_lambda > 0 && fairing_lambda <= 1)) return bad("fairing_lambda must be in (0, 1]");
   if (fairing_steps < 0) return bad("fairing_steps must be >= 0");
-  if (detail_rounds < 0 || detail_rounds > 100) return bad("detail_rounds must be in 0..100");
+  if (detail_rounds < -1 || detail_rounds > 100) return bad("detail_rounds must be in -1..100 (-1 = automatic)");
   if (pull_rounds < 0 || pull_rounds > 100) return bad("pull_rounds must be in 0..100");
   if (detail_iterations < 1 || detail_iterations > 1000) return bad("detail_iterations must be in 1..1000");
   if (!(detail_weight > 0)) return bad("detail_weight must be > 0");

@@ -65,6 +65,9 @@ public:
   /// ROI points farther than max_match_distance from the current shape; with `surface_only`
   /// only those that are not isolated (fit_impl::is_surface_point).
   Eigen::Index pointsBeyondMatchDistance(bool surface_only = false) const;
+  /// FitReport::tail_mean of the current shape (the mean of the largest 1 % of the ROI point
+  /// distances), as finish() would report it for this shape.
+  double tailMean() const;
   FitReport finish(TriMesh& result, std::vector<VertexStatus>& status);
   /// Nodes of the coarse stage's graph (0: none ran; at most the template's vertices).
   int coarseNodes() const { return rep_.coarse_nodes; }
@@ -85,9 +88,19 @@ FitReport fit_once(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eig
                    const std::vector<FitMarker>& markers, const RegionOfInterest& roi, const FitParameters& params,
                    TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
                    bool orient_normals, int coarse_prepass, SharedWork* shared = nullptr, bool markers_from_fit = false);
+// A hypothesis of a fit without markers whose second pass has run its stages but not its
+// detail rounds: those run only for the hypothesis that is kept (markerless_fit, fit_template).
+struct DeferredPass {
+  ProgressCallback progress;       // the hypothesis's own (the run's sub-progress refers to it)
+  std::vector<FitMarker> markers;  // the second pass's markers (the run refers to them)
+  FitReport first;                 // the first pass's report
+  std::unique_ptr<FitRun> run;     // null: no second pass (too few matched vertices)
+  Clock::time_point t_all;
+};
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                         bool orient_normals, int coarse_prepass, SharedWork& shared);
+                         bool orient_normals, int coarse_prepass, SharedWork& shared, DeferredPass* defer = nullptr);
+FitReport second_pass_report(FitReport rep, const FitReport& first, std::size_t n_markers, Clock::time_point t_all);
 
 // What every fit checks first: the parameters, the template, the cloud's and normals' sizes.
 void check_fit_inputs(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const FitParameters& params) {
@@ -322,6 +335,10 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // coarse_nodes −1: the coarse stage when the fit aligns the template itself
   FitParameters params = params_in;
   if (params.coarse_nodes == -1) params.coarse_nodes = markerless && params.align_without_markers ? 400 : 0;
+  // detail_rounds −1: 4 rounds where they are cheap (a template of at most 20k vertices); a fit
+  // without markers runs them on its kept hypothesis only (below)
+  if (params.detail_rounds == -1)
+    params.detail_rounds = !params.laplacian_updating && !params.remeshing && templ.V.rows() <= FitParameters::kAutoDetailVertices ? 4 : 0;
   if (!markerless) {
     // with markers and coarse_nodes −1: the fit without and the fit with the coarse stage, side
     // by side, and the one that explains more of the scan kept (below)
@@ -408,6 +425,10 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   // 2.45-2.58 s against 3.02-3.05 s; one after the other 3.95-4.06 s)
   const int workers = budget >= 2 ? int(nh) : 1;
   const int omp_each = std::max(1, budget / workers);
+  // with detail rounds, each hypothesis stops before them and is scored there; only the kept one
+  // runs them (below): one hypothesis's rounds instead of nh
+  const bool defer = params.detail_rounds > 0;
+  std::vector<DeferredPass> deferred(defer ? nh : 0);
   auto work = [&]() {
 #ifdef _OPENMP
     omp_set_num_threads(omp_each);  // this thread's OpenMP regions only
@@ -415,8 +436,15 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     for (std::size_t h = next++; h < nh; h = next++) {
       if (stop.load()) break;
       try {
-        reps[h] = markerless_fit(templ, P_in, N_in, roi, params, results[h], statuses[h], progress_of(h), orient_normals, prepass[h],
-                                 shared);
+        if (defer) {
+          // (the deferred run refers to the callback: it lives in deferred[h], not in a temporary)
+          deferred[h].progress = progress_of(h);
+          reps[h] = markerless_fit(templ, P_in, N_in, roi, params, results[h], statuses[h], deferred[h].progress, orient_normals,
+                                   prepass[h], shared, &deferred[h]);
+        } else {
+          reps[h] = markerless_fit(templ, P_in, N_in, roi, params, results[h], statuses[h], progress_of(h), orient_normals, prepass[h],
+                                   shared);
+        }
       } catch (...) {
         errors[h] = std::current_exception();
         stop = true;
@@ -450,6 +478,19 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
     scores.push_back(reps[h].tail_mean);
     if (reps[h].tail_mean < reps[kept].tail_mean) kept = h;  // ties keep the earlier hypothesis
   }
+  if (defer) {
+    for (std::size_t h = 0; h < nh; ++h)
+      if (h != kept) {
+        deferred[h].run.reset();  // (its memory)
+        std::lock_guard<std::mutex> lock(m);
+        fraction[h] = 1.0;  // the bar follows the kept hypothesis's detail rounds
+      }
+    DeferredPass& d = deferred[kept];
+    if (d.run) {  // (on all threads: the block above gave this thread its own count back)
+      reps[kept] = second_pass_report(d.run->finish(results[kept], statuses[kept]), d.first, d.markers.size(), d.t_all);
+      d.run.reset();
+    }
+  }
   FitReport rep = std::move(reps[kept]);
   require_a_match(rep, templ, P_in, false);
   warn_if_crumpled(rep, templ);
@@ -480,7 +521,7 @@ namespace {
 // Without markers: the aligned fit, then its matched vertices as markers of a second fit.
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
-                         bool orient_normals, int coarse_prepass, SharedWork& shared) {
+                         bool orient_normals, int coarse_prepass, SharedWork& shared, DeferredPass* defer) {
   const auto t_all = Clock::now();
   FitParameters first = params;
   first.pull_rounds = 0;    // the second pass pulls
@@ -505,18 +546,34 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
     m.position = r1.V.row(v).transpose();
     auto_markers.push_back(m);
   }
+  if (defer) {
+    // the second pass up to its detail rounds; the returned report carries its score only
+    defer->markers = std::move(auto_markers);
+    defer->first = rep1;
+    defer->t_all = t_all;
+    defer->run = std::make_unique<FitRun>(templ, P_in, N_in, defer->markers, roi, params, sub_progress(progress, 0.4, 1.0), orient_normals,
+                                          coarse_prepass, &shared, true);
+    defer->run->fitStages();
+    FitReport score;
+    score.tail_mean = defer->run->tailMean();
+    return score;
+  }
   FitReport rep = fit_once(templ, P_in, N_in, auto_markers, roi, params, result, status, sub_progress(progress, 0.4, 1.0), orient_normals,
                            coarse_prepass, &shared, true);
+  return second_pass_report(std::move(rep), rep1, auto_markers.size(), t_all);
+}
+
+// The second pass's report of a fit without markers, with the first pass's alignment.
+FitReport second_pass_report(FitReport rep, const FitReport& rep1, std::size_t n_markers, Clock::time_point t_all) {
   rep.aligned_without_markers = true;
   rep.alignment = rep1.alignment;
   rep.alignment_rotation_deg = rep1.alignment_rotation_deg;
   rep.alignment_scale = rep1.alignment_scale;
   rep.alignment_rms = rep1.alignment_rms;
   rep.alignment_iterations = rep1.alignment_iterations;
-  rep.auto_markers = int(auto_markers.size());
+  rep.auto_markers = int(n_markers);
   rep.t_alignment = rep1.t_total;  // the whole first pass
-  rep.message = rep1.message + "second pass with " + std::to_string(auto_markers.size()) +
-                " markers taken from the aligned fit. " + rep.message;
+  rep.message = rep1.message + "second pass with " + std::to_string(n_markers) + " markers taken from the aligned fit. " + rep.message;
   rep.t_total = seconds_since(t_all);
   return rep;
 }
@@ -578,6 +635,10 @@ Eigen::Index FitRun::pointsBeyondMatchDistance(bool surface_only) const {
   for (Eigen::Index i = 0; i < r.d.size(); ++i)
     n += r.d(i) > s_->u.max_match_distance && (!surface_only || fit_impl::is_surface_point(s_->cloud, r.Q.row(i).transpose()));
   return n;
+}
+
+double FitRun::tailMean() const {
+  return fit_impl::tail_mean(fit_impl::roi_distances(*s_).d);
 }
 
 FitReport FitRun::finish(TriMesh& result, std::vector<VertexStatus>& status) {
