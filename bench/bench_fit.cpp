@@ -399,6 +399,8 @@ int main(int argc, char** argv) {
     if (!wanted(c.name)) continue;
     const TriMesh t = read_mesh(kData + c.path);
     SeedSummary gt, gt_detail;
+    // the detail row runs the other setting: none where the defaults run 4, else 4
+    const bool default_detail = base.resolvedDetailRounds(t.V.rows()) > 0;
     for (unsigned sd = seed; sd <= seed_last; ++sd) {
     synth::ScenarioOptions o;
     o.points = c.points;
@@ -418,9 +420,7 @@ int main(int argc, char** argv) {
     row(name, s.markers.size(), t.V.rows(), s.P.rows(), r, note);
     gt.add(e.hausdorff_clean_rel, hole, e.hole_mean_rel, r);
     if (detail_row) {
-      // the same with the other detail-round setting: without them where the default runs 4
-      // (templates of at most 20k vertices), with 4 where it runs none (FitParameters::detail_rounds)
-      const bool default_detail = base.detail_rounds == -1 ? t.V.rows() <= FitParameters::kAutoDetailVertices : base.detail_rounds > 0;
+      // the same with the other detail-round setting (default_detail above)
       FitParameters dp = base;
       dp.detail_rounds = default_detail ? 0 : 4;
       TriMesh dfit;
@@ -467,7 +467,6 @@ int main(int argc, char** argv) {
       std::printf("| %s, over seeds |\n", c.name);
       print_summary(seed, seed_last, gt, 0);
       if (detail_row) {
-        const bool default_detail = base.detail_rounds == -1 ? t.V.rows() <= FitParameters::kAutoDetailVertices : base.detail_rounds > 0;
         std::printf("|   same %s, over seeds |\n", default_detail ? "without detail rounds" : "+ 4 detail rounds");
         print_summary(seed, seed_last, gt_detail, 0);
       }

@@ -116,9 +116,8 @@ const RoiDistances& roi_distances(FitState& s) {
   return r;
 }
 
-double tail_mean(const Eigen::VectorXd& d) {
-  if (d.size() == 0) return 0;
-  std::vector<double> sorted(d.data(), d.data() + d.size());
+double tail_mean(std::vector<double> sorted) {
+  if (sorted.empty()) return 0;
   const std::size_t k = std::max<std::size_t>(1, sorted.size() / 100);
   std::nth_element(sorted.begin(), sorted.end() - std::ptrdiff_t(k), sorted.end());
   std::sort(sorted.end() - std::ptrdiff_t(k), sorted.end());  // one summation order
@@ -148,7 +147,7 @@ void compute_metrics(FitState& s, int known_crossings) {
     const auto i99 = sorted.begin() + long(0.99 * double(nq - 1));
     std::nth_element(sorted.begin(), i99, sorted.end());
     rep.p99 = *i99;
-    rep.tail_mean = tail_mean(dist);
+    rep.tail_mean = tail_mean(std::move(sorted));  // (its order is not needed after p99)
     rep.coverage_points = double((dist.array() <= u.max_match_distance).count()) / double(nq);
     rep.unexplained = unexplained_regions(Q, dist, diag, u.max_match_distance);
     // fold-overs: face normal against the cloud normals near the face centre. Estimated normals

@@ -198,6 +198,11 @@ void prepare_markers(FitState& s, const Eigen::MatrixX3d& P_in, const RegionOfIn
 
 }  // namespace fit_impl
 
+int FitParameters::resolvedDetailRounds(Eigen::Index template_vertices) const {
+  if (detail_rounds != -1) return detail_rounds;
+  return !laplacian_updating && !remeshing && template_vertices <= kAutoDetailVertices ? 4 : 0;
+}
+
 bool FitParameters::isValid(std::string* why) const {
   auto bad = [&](const std::string& m) { if (why) *why = m; return false; };
   if (!(max_match_distance >= 0)) return bad("max_match_distance must be >= 0 (0 = automatic)");

@@ -255,9 +255,9 @@ bool is_surface_point(const PreparedCloud& c, const Eigen::Vector3d& q);
 /// point_mesh_distances gives, measured again only where the shape moved since the last call
 /// (update_point_mesh_distances; all of it when F changed or over a quarter of the vertices moved).
 const RoiDistances& roi_distances(FitState& s);
-/// FitReport::tail_mean of ROI point distances: the mean of the largest 1 % (at least one; 0 for
-/// none), summed in ascending order.
-double tail_mean(const Eigen::VectorXd& d);
+/// FitReport::tail_mean of ROI point distances (in any order; reordered here): the mean of the
+/// largest 1 % (at least one; 0 for none), summed in ascending order.
+double tail_mean(std::vector<double> d);
 /// Points in the regions (sum of their counts).
 Eigen::Index unexplained_points(const std::vector<FitReport::UnexplainedRegion>& regions);
 /// FitReport::unexplained of the ROI points Q and their distances to the result. `member`

@@ -95,12 +95,11 @@ struct DeferredPass {
   std::vector<FitMarker> markers;  // the second pass's markers (the run refers to them)
   FitReport first;                 // the first pass's report
   std::unique_ptr<FitRun> run;     // null: no second pass (too few matched vertices)
-  Clock::time_point t_all;
 };
 FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const RegionOfInterest& roi,
                          const FitParameters& params, TriMesh& result, std::vector<VertexStatus>& status, const ProgressCallback& progress,
                          bool orient_normals, int coarse_prepass, SharedWork& shared, DeferredPass* defer = nullptr);
-FitReport second_pass_report(FitReport rep, const FitReport& first, std::size_t n_markers, Clock::time_point t_all);
+FitReport second_pass_report(FitReport rep, const FitReport& first, std::size_t n_markers);
 
 // What every fit checks first: the parameters, the template, the cloud's and normals' sizes.
 void check_fit_inputs(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const Eigen::MatrixX3d& N_in, const FitParameters& params) {
@@ -337,8 +336,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
   if (params.coarse_nodes == -1) params.coarse_nodes = markerless && params.align_without_markers ? 400 : 0;
   // detail_rounds −1: 4 rounds where they are cheap (a template of at most 20k vertices); a fit
   // without markers runs them on its kept hypothesis only (below)
-  if (params.detail_rounds == -1)
-    params.detail_rounds = !params.laplacian_updating && !params.remeshing && templ.V.rows() <= FitParameters::kAutoDetailVertices ? 4 : 0;
+  params.detail_rounds = params.resolvedDetailRounds(templ.V.rows());
   if (!markerless) {
     // with markers and coarse_nodes −1: the fit without and the fit with the coarse stage, side
     // by side, and the one that explains more of the scan kept (below)
@@ -487,7 +485,7 @@ FitReport fit_template(const TriMesh& templ, const Eigen::MatrixX3d& P_in, const
       }
     DeferredPass& d = deferred[kept];
     if (d.run) {  // (on all threads: the block above gave this thread its own count back)
-      reps[kept] = second_pass_report(d.run->finish(results[kept], statuses[kept]), d.first, d.markers.size(), d.t_all);
+      reps[kept] = second_pass_report(d.run->finish(results[kept], statuses[kept]), d.first, d.markers.size());
       d.run.reset();
     }
   }
@@ -550,7 +548,6 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
     // the second pass up to its detail rounds; the returned report carries its score only
     defer->markers = std::move(auto_markers);
     defer->first = rep1;
-    defer->t_all = t_all;
     defer->run = std::make_unique<FitRun>(templ, P_in, N_in, defer->markers, roi, params, sub_progress(progress, 0.4, 1.0), orient_normals,
                                           coarse_prepass, &shared, true);
     defer->run->fitStages();
@@ -560,11 +557,13 @@ FitReport markerless_fit(const TriMesh& templ, const Eigen::MatrixX3d& P_in, con
   }
   FitReport rep = fit_once(templ, P_in, N_in, auto_markers, roi, params, result, status, sub_progress(progress, 0.4, 1.0), orient_normals,
                            coarse_prepass, &shared, true);
-  return second_pass_report(std::move(rep), rep1, auto_markers.size(), t_all);
+  FitReport out = second_pass_report(std::move(rep), rep1, auto_markers.size());
+  out.t_total = seconds_since(t_all);
+  return out;
 }
 
 // The second pass's report of a fit without markers, with the first pass's alignment.
-FitReport second_pass_report(FitReport rep, const FitReport& rep1, std::size_t n_markers, Clock::time_point t_all) {
+FitReport second_pass_report(FitReport rep, const FitReport& rep1, std::size_t n_markers) {
   rep.aligned_without_markers = true;
   rep.alignment = rep1.alignment;
   rep.alignment_rotation_deg = rep1.alignment_rotation_deg;
@@ -574,7 +573,6 @@ FitReport second_pass_report(FitReport rep, const FitReport& rep1, std::size_t n
   rep.auto_markers = int(n_markers);
   rep.t_alignment = rep1.t_total;  // the whole first pass
   rep.message = rep1.message + "second pass with " + std::to_string(n_markers) + " markers taken from the aligned fit. " + rep.message;
-  rep.t_total = seconds_since(t_all);
   return rep;
 }
 
@@ -638,7 +636,8 @@ Eigen::Index FitRun::pointsBeyondMatchDistance(bool surface_only) const {
 }
 
 double FitRun::tailMean() const {
-  return fit_impl::tail_mean(fit_impl::roi_distances(*s_).d);
+  const Eigen::VectorXd& d = fit_impl::roi_distances(*s_).d;
+  return fit_impl::tail_mean(std::vector<double>(d.data(), d.data() + d.size()));
 }
 
 FitReport FitRun::finish(TriMesh& result, std::vector<VertexStatus>& status) {

@@ -273,6 +273,10 @@ struct FitParameters {
 
   /// Checks ranges; fills `why` with the first problem.
   bool isValid(std::string* why = nullptr) const;
+  /// detail_rounds as a fit of a template with `template_vertices` vertices runs them: −1
+  /// resolved (4 up to kAutoDetailVertices, 0 above or with laplacian_updating / remeshing),
+  /// any other value as it is.
+  int resolvedDetailRounds(Eigen::Index template_vertices) const;
 };
 
 enum class VertexStatus : unsigned char { Matched = 0, Propagated = 1, Masked = 2, Unmatched = 3 };
