@@ -13,7 +13,10 @@
 //     hole, no outliers); --markerless: instead x1.05, 3.7 % off and turned by 8 deg, fitted without
 //     markers and (next row) with them; --hole-axis N: the hole across principal axis N (default 1);
 //     --save-target FILE writes its true shape; --hole-oracle adds the hole
-//     floor of a rigidity prior (a deformation graph driven by the true positions outside the hole)
+//     floor of a rigidity prior (a deformation graph driven by the true positions outside the hole);
+//     --worst N prints where the N clean samples farthest from each fit lie (sign: + the truth
+//     outside the fit); --noise PCT (default 0.2) and --points N (default per model) change the
+//     scenario (with --articulated 0: the floor the recipe sets without any turn)
 //   --coarse N / --coarse-stiffness A0 A1 / --coarse-rounds N / --coarse-steps N / --coarse-radius R /
 //   --coarse-angle DEG / --coarse-point-weight W / --coarse-prepass N[,N...]: the coarse stage (FitParameters::coarse_*);
 //   --refine-rotations, --detail-rounds N, --pull-rounds N, --detail-no-pull, --max-iterations N: as FitParameters
@@ -55,6 +58,39 @@ using namespace tbsp;
 static const std::string kData = TBSP_SHARED_DATA_DIR;
 
 namespace {
+// --worst N: the N clean samples farthest from the fit (truth -> fit, % of the diagonal), each
+// with the true-shape vertex nearest to it (its index, and where it lies in the target's box, 0..1
+// per axis), and how many samples lie beyond 0.3 % and 0.5 %: whether the clean Hausdorff is one
+// spot or a region
+void print_worst_samples(const synth::Scenario& s, const TriMesh& fit, int n) {
+  std::vector<Eigen::Index> in;
+  for (std::size_t i = 0; i < s.inlier.size(); ++i)
+    if (s.inlier[i]) in.push_back(Eigen::Index(i));
+  Eigen::MatrixX3d C(Eigen::Index(in.size()), 3);
+  for (std::size_t k = 0; k < in.size(); ++k) C.row(Eigen::Index(k)) = s.clean.row(in[k]);
+  const Eigen::VectorXd d = point_mesh_distances(fit.V, fit.F, C) / s.diag;
+  std::vector<Eigen::Index> order(std::size_t(d.rows()));
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = Eigen::Index(k);
+  std::sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return d(a) > d(b) || (d(a) == d(b) && a < b); });
+  const PointSearch tv(s.target);
+  const MeshDistance md(fit.V, fit.F);
+  const Eigen::RowVector3d lo = s.target.colwise().minCoeff(), ext = s.target.colwise().maxCoeff() - lo;
+  std::printf("|   worst clean samples: %ld beyond 0.3%%, %ld beyond 0.5%% of %ld;", long((d.array() > 0.003).count()),
+              long((d.array() > 0.005).count()), long(d.rows()));
+  for (int k = 0; k < n && k < int(order.size()); ++k) {
+    const Eigen::Vector3d q = C.row(order[std::size_t(k)]).transpose();
+    const Eigen::Index v = tv.nearest(q);
+    const Eigen::RowVector3d u = (q.transpose() - lo).cwiseQuotient(ext);
+    // the sign: + where the truth lies outside the fit (the fit falls short of a bump), − inside
+    int face = -1;
+    const Eigen::Vector3d c = md.closest(q, &face);
+    const Eigen::Vector3d a = fit.V.row(fit.F(face, 0)), b = fit.V.row(fit.F(face, 1)), e = fit.V.row(fit.F(face, 2));
+    const double side = (q - c).dot((b - a).cross(e - a));
+    std::printf(" %c%.3f%% at v%ld (%.2f %.2f %.2f)", side >= 0 ? '+' : '-', 100 * d(order[std::size_t(k)]), long(v), u(0), u(1), u(2));
+  }
+  std::printf("\n");
+}
+
 void row(const char* model, std::size_t markers, Eigen::Index verts, Eigen::Index pts, const FitReport& r, const char* extra = "") {
   char coarse[160] = "", kept[96] = "";
   if (r.coarse_hypotheses > 1) {
@@ -170,6 +206,9 @@ int main(int argc, char** argv) {
   std::string save_target;
   std::string save_fit;  // --save-fit PREFIX: the real-scan rows' fits as PREFIX_DEG[_coarse].ply (with the scan points, PREFIX_DEG[_coarse]_scan.ply, and their distances to the fit, _scan_distance.txt, for `tbsp render --scalar`), the articulated ones' as PREFIX_DEG.obj
   bool hole_oracle = false;  // --hole-oracle: with --articulated, the floor of rigidity-prior hole filling
+  int worst = 0;              // --worst N: with --articulated, where the N farthest clean samples lie
+  double noise = -1;          // --noise PCT: with --articulated, the noise sigma in % of the diagonal (default 0.2)
+  int points = 0;             // --points N: with --articulated, the cloud's size (default per model)
   std::string articulated_model = "bunny";  // --articulated-model bunny|armadillo|human
   int hole_axis = 1;  // --hole-axis N: the articulated rows' hole across principal axis N (ScenarioOptions::hole_axis)
   bool markerless = false;  // --markerless: articulated rows roughly in place (8 deg, 3.7 %, x1.05), fitted without and with markers
@@ -202,6 +241,9 @@ int main(int argc, char** argv) {
     else if (a == "--save-target" && i + 1 < argc) save_target = argv[++i];
     else if (a == "--save-fit" && i + 1 < argc) save_fit = argv[++i];
     else if (a == "--hole-oracle") hole_oracle = true;
+    else if (a == "--worst" && i + 1 < argc) worst = std::atoi(argv[++i]);
+    else if (a == "--noise" && i + 1 < argc) noise = std::atof(argv[++i]) / 100;
+    else if (a == "--points" && i + 1 < argc) points = std::atoi(argv[++i]);
     else if (a == "--markerless") markerless = true;
     else if (a == "--hole-axis" && i + 1 < argc) hole_axis = std::clamp(std::atoi(argv[++i]), 0, 2);
     else if (a == "--articulated-model" && i + 1 < argc) articulated_model = argv[++i];
@@ -224,7 +266,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr, "usage: bench_fit [-v|--verbose] [--no-poisson] [--no-detail-row] [--repeat N] [--only WORD] [--seed N | --seeds A:B] [--markers N] "
                            "[--propagation-weight W] [--rim-rejection R] [--refine-rotations] [--no-rotation-field] [--detail-rounds N] [--pull-rounds N] [--detail-no-pull] [--max-iterations N] "
-                           "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--hole-axis 0|1|2] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--coarse N] [--coarse-stiffness A0 A1] "
+                           "[--articulated DEG]... [--articulated-model bunny|armadillo|human] [--markerless] [--hole-axis 0|1|2] [--real-tilt DEG]... [--real-markers N] [--save-target FILE] [--save-fit PREFIX] [--hole-oracle] [--worst N] [--noise PCT] [--points N] [--coarse N] [--coarse-stiffness A0 A1] "
                            "[--coarse-rounds N] [--coarse-steps N] [--coarse-radius R] [--coarse-angle DEG] [--coarse-point-weight W] [--coarse-prepass N[,N...]]\n");
       return 2;
     }
@@ -310,9 +352,10 @@ int main(int argc, char** argv) {
     SeedSummary with_markers, without_markers;
     for (unsigned sd = seed; sd <= seed_last; ++sd) {
     synth::ScenarioOptions o;
-    o.points = art.points;
+    o.points = points > 0 ? points : art.points;
     o.seed = sd;
     o.markers = n_markers;
+    if (noise >= 0) o.noise = noise;
     o.bend_deg = o.twist_deg = 0;
     o.scale = 1.1;
     o.outliers = 0;
@@ -339,6 +382,7 @@ int main(int argc, char** argv) {
       std::snprintf(mnote, sizeof mnote, "clean Hausdorff %.3f%%; hole: surface %.3f%%, per vertex %.3f%%", 100 * me.hausdorff_clean_rel,
                     100 * mhole, 100 * me.hole_mean_rel);
       row(mname, 0, t.V.rows(), s.P.rows(), mr, mnote);
+      if (worst > 0) print_worst_samples(s, mfit, worst);
       without_markers.add(me.hausdorff_clean_rel, mhole, me.hole_mean_rel, mr);
     }
     TriMesh fit;
@@ -353,6 +397,7 @@ int main(int argc, char** argv) {
     if (seed_last > seed) std::snprintf(name + std::strlen(name), sizeof name - std::strlen(name), ", seed %u", sd);
     row(name, s.markers.size(), t.V.rows(), s.P.rows(), r, note);
     with_markers.add(e.hausdorff_clean_rel, hole, e.hole_mean_rel, r);
+    if (worst > 0) print_worst_samples(s, fit, worst);
     if (hole_oracle) {
       // the floor of as-rigid-as-possible hole filling on this scenario: a deformation graph
       // (400 nodes) driven by the TRUE position of every vertex outside the hole, after the
