@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <random>
 #include <utility>
@@ -63,6 +64,35 @@ TEST(RadiusGrid, VisitsInTheSameOrderEveryTime) {
   const auto na = grid_neighbours(a, q), nb = grid_neighbours(b, q);
   ASSERT_GT(na.size(), 50u);
   EXPECT_EQ(na, nb);
+}
+
+// The storage order is the documented one — cell by cell in ascending key (x fastest, then y, z;
+// cells `radius` wide from the points' minimum corner), rows ascending within a cell — whether
+// the grid is built by its counting sort (dense points) or by a comparison sort (a few points
+// in a box of many cells): the fitter's sums follow this order, so their bits depend on it.
+TEST(RadiusGrid, StoresThePointsCellByCellInAscendingKeyAndRowOrder) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (const bool dense : {true, false}) {
+    Eigen::MatrixX3d P(dense ? 5000 : 40, 3);
+    for (Eigen::Index i = 0; i < P.rows(); ++i) P.row(i) << u(rng), u(rng), u(rng);
+    P.row(7) = P.row(3);  // a duplicate: the same cell, rows 3 then 7
+    const double r = dense ? 0.05 : 0.01;  // 21^3 cells for 5000 points; 101^3 for 40
+    const RadiusGrid g(P, r);
+    const Eigen::RowVector3d lo = P.colwise().minCoeff(), hi = P.colwise().maxCoeff();
+    std::int64_t dims[3];
+    for (int d = 0; d < 3; ++d) dims[d] = std::int64_t(std::floor((hi(d) - lo(d)) / r)) + 1;
+    auto key = [&](Eigen::Index i) {
+      std::int64_t c[3];
+      for (int d = 0; d < 3; ++d) c[d] = std::min<std::int64_t>(dims[d] - 1, std::int64_t(std::floor((P(i, d) - lo(d)) / r)));
+      return std::make_pair((c[2] * dims[1] + c[1]) * dims[0] + c[0], i);
+    };
+    std::vector<std::pair<std::int64_t, Eigen::Index>> want;
+    for (Eigen::Index i = 0; i < P.rows(); ++i) want.push_back(key(i));
+    std::sort(want.begin(), want.end());
+    ASSERT_EQ(g.rows().size(), want.size()) << (dense ? "dense" : "sparse");
+    for (std::size_t s = 0; s < want.size(); ++s) ASSERT_EQ(Eigen::Index(g.rows()[s]), want[s].second) << (dense ? "dense" : "sparse") << " slot " << s;
+  }
 }
 
 TEST(RadiusGrid, SkipsNonFiniteRowsAndHandlesEmptySets) {

@@ -293,14 +293,18 @@ static void run_rounds(FitState& s, int rounds, bool local) {
     };
     auto index_residuals = [&]() {
       const Eigen::MatrixX3d C = tracked_closest();
+      // the tests on both threads, the kept points listed in order after
+      std::vector<char> pass(rk.size());
+#pragma omp parallel for schedule(static)
+      for (Eigen::Index t = 0; t < Eigen::Index(rk.size()); ++t) {
+        const Eigen::Index ci = rk[std::size_t(t)];
+        pass[std::size_t(t)] = !(N.row(ci).dot(unit_face_normal(V, F, rf[std::size_t(t)])) < cos_detail) &&
+                               !((P.row(ci) - C.row(t)).norm() > rcap[std::size_t(t)]);
+      }
       std::vector<Eigen::Index> keep;
       keep.reserve(rk.size());
-      for (std::size_t t = 0; t < rk.size(); ++t) {
-        const Eigen::Index ci = rk[t];
-        if (N.row(ci).dot(unit_face_normal(V, F, rf[t])) < cos_detail) continue;
-        if ((P.row(ci) - C.row(Eigen::Index(t))).norm() > rcap[t]) continue;
-        keep.push_back(Eigen::Index(t));
-      }
+      for (std::size_t t = 0; t < rk.size(); ++t)
+        if (pass[t]) keep.push_back(Eigen::Index(t));
       ResidualIndex x;
       Eigen::MatrixX3d Ck(Eigen::Index(keep.size()), 3);
       for (std::size_t k = 0; k < keep.size(); ++k) Ck.row(Eigen::Index(k)) = C.row(keep[k]);

@@ -37,14 +37,27 @@ RadiusGrid::RadiusGrid(const Eigen::MatrixX3d& P, double radius) : radius_(radiu
   for (int d = 0; d < 3; ++d) cell_ = std::max(cell_, (hi(d) - lo(d)) / double(kMaxCells - 1));
   for (int d = 0; d < 3; ++d) dims_[d] = std::min(kMaxCells, std::int64_t(std::floor((hi(d) - lo(d)) / cell_)) + 1);
   // cell key of every point, sorted (ties by row: a fixed order)
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> kr(rows.size());
+  std::vector<std::uint64_t> key(rows.size());
   for (std::size_t k = 0; k < rows.size(); ++k) {
     std::int64_t c[3];
     for (int d = 0; d < 3; ++d)
       c[d] = std::min<std::int64_t>(dims_[d] - 1, std::int64_t(std::floor((P(rows[k], d) - lo(d)) / cell_)));
-    kr[k] = {std::uint64_t((c[2] * dims_[1] + c[1]) * dims_[0] + c[0]), rows[k]};
+    key[k] = std::uint64_t((c[2] * dims_[1] + c[1]) * dims_[0] + c[0]);
   }
-  std::sort(kr.begin(), kr.end());
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> kr(rows.size());
+  const std::uint64_t cells = std::uint64_t(dims_[0]) * std::uint64_t(dims_[1]) * std::uint64_t(dims_[2]);
+  if (cells <= std::max<std::uint64_t>(4 * rows.size(), std::uint64_t(1) << 16)) {
+    // a counting sort over the cells (the grid is rebuilt every iteration of the fitter's
+    // detail rounds: O(n + cells) instead of a comparison sort's O(n log n)); stable, and the
+    // rows come in ascending order, so the order is the (key, row) order the sort gives
+    std::vector<std::uint32_t> first(std::size_t(cells) + 1, 0);
+    for (std::uint64_t k : key) ++first[std::size_t(k) + 1];
+    for (std::size_t c = 0; c < std::size_t(cells); ++c) first[c + 1] += first[c];
+    for (std::size_t k = 0; k < rows.size(); ++k) kr[first[std::size_t(key[k])]++] = {key[k], rows[k]};
+  } else {
+    for (std::size_t k = 0; k < rows.size(); ++k) kr[k] = {key[k], rows[k]};
+    std::sort(kr.begin(), kr.end());
+  }
   xyz_.resize(3 * kr.size());
   index_.resize(kr.size());
   for (std::size_t k = 0; k < kr.size(); ++k) {

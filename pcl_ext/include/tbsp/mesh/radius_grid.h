@@ -5,10 +5,11 @@
 ///
 /// For loops that rebuild the search after every step and ask every query with the same radius
 /// (the fitter's detail rounds: ~90k points indexed and ~43k queries per iteration). Against
-/// PointSearch (nanoflann's k-d tree) it builds in O(n log n) with a small constant (one sort of
-/// 64-bit cell keys, no tree) and answers a query by scanning the 27 cells around it, contiguous
-/// in memory. Written by hand: the k-d trees and octrees of nanoflann, FLANN and PCL answer any
-/// radius; none offers a fixed-radius grid rebuilt by one sort, with a fixed visiting order.
+/// PointSearch (nanoflann's k-d tree) it builds in O(n) where the points are dense (a counting
+/// sort over the cells; else one sort of 64-bit cell keys; no tree) and answers a query by
+/// scanning the 27 cells around it, contiguous in memory. Written by hand: the k-d trees and
+/// octrees of nanoflann, FLANN and PCL answer any radius; none offers a fixed-radius grid rebuilt
+/// by one sort, with a fixed visiting order.
 
 #include <Eigen/Core>
 #include <cmath>
@@ -21,7 +22,9 @@ class RadiusGrid {
 public:
   RadiusGrid() = default;
   /// \brief Indexes the rows of P (copied) for queries of radius `radius` (> 0, in P's units).
-  /// Non-finite rows are left out. O(n log n) time, O(n) memory. The cells are `radius` wide, or
+  /// Non-finite rows are left out. O(n + cells) time (a counting sort over the cells) where the
+  /// points' box holds at most max(4n, 65536) cells, else O(n log n) (one sort of the cell keys);
+  /// O(n) memory beyond those cells' counters. The cells are `radius` wide, or
   /// wider where that would make more than 2^20 cells along an axis (a radius below a millionth
   /// of the points' extent: still correct, the queries scan more points).
   /// \throws InvalidInput for radius ≤ 0 or non-finite, or 2^32 − 1 points or more.
