@@ -68,12 +68,12 @@ void print_worst_samples(const synth::Scenario& s, const TriMesh& fit, int n) {
     if (s.inlier[i]) in.push_back(Eigen::Index(i));
   Eigen::MatrixX3d C(Eigen::Index(in.size()), 3);
   for (std::size_t k = 0; k < in.size(); ++k) C.row(Eigen::Index(k)) = s.clean.row(in[k]);
-  const Eigen::VectorXd d = point_mesh_distances(fit.V, fit.F, C) / s.diag;
+  Eigen::VectorXi faces;  // each sample's closest face (the sign below)
+  const Eigen::VectorXd d = point_mesh_distances(fit.V, fit.F, C, &faces) / s.diag;
   std::vector<Eigen::Index> order(std::size_t(d.rows()));
   for (std::size_t k = 0; k < order.size(); ++k) order[k] = Eigen::Index(k);
   std::sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return d(a) > d(b) || (d(a) == d(b) && a < b); });
   const PointSearch tv(s.target);
-  const MeshDistance md(fit.V, fit.F);
   const Eigen::RowVector3d lo = s.target.colwise().minCoeff(), ext = s.target.colwise().maxCoeff() - lo;
   std::printf("|   worst clean samples: %ld beyond 0.3%%, %ld beyond 0.5%% of %ld;", long((d.array() > 0.003).count()),
               long((d.array() > 0.005).count()), long(d.rows()));
@@ -82,10 +82,10 @@ void print_worst_samples(const synth::Scenario& s, const TriMesh& fit, int n) {
     const Eigen::Index v = tv.nearest(q);
     const Eigen::RowVector3d u = (q.transpose() - lo).cwiseQuotient(ext);
     // the sign: + where the truth lies outside the fit (the fit falls short of a bump), − inside
-    int face = -1;
-    const Eigen::Vector3d c = md.closest(q, &face);
+    const int face = faces(order[std::size_t(k)]);
     const Eigen::Vector3d a = fit.V.row(fit.F(face, 0)), b = fit.V.row(fit.F(face, 1)), e = fit.V.row(fit.F(face, 2));
-    const double side = (q - c).dot((b - a).cross(e - a));
+    const Eigen::Vector3d w = closest_point_barycentric(q, a, b, e);
+    const double side = (q - (w(0) * a + w(1) * b + w(2) * e)).dot((b - a).cross(e - a));
     std::printf(" %c%.3f%% at v%ld (%.2f %.2f %.2f)", side >= 0 ? '+' : '-', 100 * d(order[std::size_t(k)]), long(v), u(0), u(1), u(2));
   }
   std::printf("\n");

@@ -116,13 +116,13 @@ const RoiDistances& roi_distances(FitState& s) {
   return r;
 }
 
-double tail_mean(std::vector<double> sorted) {
-  if (sorted.empty()) return 0;
-  const std::size_t k = std::max<std::size_t>(1, sorted.size() / 100);
-  std::nth_element(sorted.begin(), sorted.end() - std::ptrdiff_t(k), sorted.end());
-  std::sort(sorted.end() - std::ptrdiff_t(k), sorted.end());  // one summation order
+double tail_mean(std::vector<double> d) {
+  if (d.empty()) return 0;
+  const std::size_t k = std::max<std::size_t>(1, d.size() / 100);
+  std::nth_element(d.begin(), d.end() - std::ptrdiff_t(k), d.end());
+  std::sort(d.end() - std::ptrdiff_t(k), d.end());  // one summation order
   double tail = 0;
-  for (auto it = sorted.end() - std::ptrdiff_t(k); it != sorted.end(); ++it) tail += *it;
+  for (auto it = d.end() - std::ptrdiff_t(k); it != d.end(); ++it) tail += *it;
   return tail / double(k);
 }
 
