@@ -4,15 +4,22 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <limits>
+#include <memory>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "cloth_cmds.h"
+#ifdef TBSP_WITH_MPI
+#include "cloth_mpi.h"
+#include "pipeline_mpi.h"
+#endif
 #include "progress_bar.h"
 #include "studio_frames.h"
 #include "tbsp/cloth/cloth_parameter_estimation.h"
@@ -125,20 +132,28 @@ void write_landscape(const std::string& path, const std::vector<double>& e, int 
   write_png(path, img);
 }
 
-int cmd_estimate(EstimateArgs a) {
-  const AnimatableModel model = load_animatable_model(a.model);
+// What every rank reads and computes on its own before the estimation.
+struct EstimateInputs {
+  AnimatableModel model;
+  std::vector<SkeletonPose> poses;
+  std::vector<Eigen::MatrixX3d> reference;
+  std::unique_ptr<ClothMaterial> truth;
+  std::unique_ptr<ClothObservations> obs;
+  int frames = 0;
+};
+
+void read_inputs(EstimateArgs& a, EstimateInputs& in, const ProgressCallback& cb, bool speak) {
+  in.model = load_animatable_model(a.model);
+  const AnimatableModel& model = in.model;
   const Studio studio = read_studio(a.studio);
   const BvhMotion clip = read_bvh(a.bvh);
-  const int frames = studio.numFrames();
+  const int frames = in.frames = studio.numFrames();
   const int last = a.first + (frames - 1) * a.step;
   if (last >= clip.numFrames())
     throw InvalidInput("'" + a.bvh + "': " + std::to_string(clip.numFrames()) + " frames; the studio's " + std::to_string(frames) + " frames from BVH frame " +
                        std::to_string(a.first) + " every " + std::to_string(a.step) + " need " + std::to_string(last + 1) + " (check --first/--step)");
-  std::unique_ptr<ClothMaterial> truth;
-  if (!a.truth.empty()) truth = std::make_unique<ClothMaterial>(parse_truth(a.truth));
-  std::vector<SkeletonPose> poses;
-  for (int i = 0; i < frames; ++i) poses.push_back(pose_by_name(model.skeleton, clip, a.first + i * a.step, a.scale, a.bvh));
-  std::vector<Eigen::MatrixX3d> reference;
+  if (!a.truth.empty()) in.truth = std::make_unique<ClothMaterial>(parse_truth(a.truth));
+  for (int i = 0; i < frames; ++i) in.poses.push_back(pose_by_name(model.skeleton, clip, a.first + i * a.step, a.scale, a.bvh));
   if (!a.reference.empty()) {
     const std::vector<std::string> files = mesh_files_in(a.reference);
     if (int(files.size()) != frames)
@@ -149,33 +164,65 @@ int cmd_estimate(EstimateArgs a) {
       if (m.V.rows() != model.mesh.V.rows())
         throw InvalidInput("'" + f + "': " + std::to_string(m.V.rows()) + " vertices, the model " + std::to_string(model.mesh.V.rows()) +
                            " (the reference must be the sequence the model was built from)");
-      reference.push_back(m.V);
+      in.reference.push_back(m.V);
     }
   } else if (a.o.window > 0) {
     a.o.window = 0;
-    if (!a.quiet) std::cout << "cloth estimate: no --reference: one simulation of the whole sequence per sample (--window 0)\n";
+    if (speak) std::cout << "cloth estimate: no --reference: one simulation of the whole sequence per sample (--window 0)\n";
   }
   a.o.search = a.search == "thesis" ? ClothSearch::Thesis : ClothSearch::Bobyqa;
   std::string why;
   if (!a.o.isValid(&why)) throw InvalidInput(why);  // fail before reading the studio
 
-  ProgressBar bar(!a.quiet);
-  const auto cb = bar.callback();
-  ClothObservations obs(studio.cameraList());
-  {
-    StudioFrameStream stream(studio, {});
-    StudioFrame fr;
-    while (stream.next(fr)) {
-      for (std::size_t c = 0; c < fr.images.size(); ++c)
-        if (fr.images[c].empty())
-          throw InvalidInput("'" + a.studio + "': camera '" + studio.cameras[c].camera.name() + "' has no images: the estimation needs the video of every camera");
-      obs.addFrame(fr.images, fr.silhouettes);
-      report_progress(cb, 0.1 * obs.numFrames() / frames, "features and silhouettes");
-    }
+  in.obs = std::make_unique<ClothObservations>(studio.cameraList());
+  ClothObservations& obs = *in.obs;
+  StudioFrameStream stream(studio, {});
+  StudioFrame fr;
+  while (stream.next(fr)) {
+    for (std::size_t c = 0; c < fr.images.size(); ++c)
+      if (fr.images[c].empty())
+        throw InvalidInput("'" + a.studio + "': camera '" + studio.cameras[c].camera.name() + "' has no images: the estimation needs the video of every camera");
+    obs.addFrame(fr.images, fr.silhouettes);
+    report_progress(cb, 0.1 * obs.numFrames() / frames, "features and silhouettes");
   }
+}
+
+// This process as one of several (mpirun): its rank, the work share and the agreement on errors
+// of the steps each rank runs alone (ClothRanks, cloth_mpi.h).
+struct Ranks {
+  int rank = 0, size = 1;
+  ClothWorkShare share;
+  std::function<void(const std::exception_ptr&)> agree;
+};
+
+// The estimation on one process (ranks: null) or as one rank of several (every rank computes its
+// share of the simulations; rank 0 shows the progress and writes the outputs).
+int run_estimate(EstimateArgs a, const Ranks* ranks) {
+  const bool lead = !ranks || ranks->rank == 0;
+  ProgressBar bar(!a.quiet && lead);
+  const auto cb = bar.callback();
+  EstimateInputs in;
+  if (ranks) {  // every rank reads on its own: a rank that fails alone must stop the others too
+    std::exception_ptr err;
+    try {
+      read_inputs(a, in, cb, !a.quiet && lead);
+    } catch (...) {
+      err = std::current_exception();
+    }
+    ranks->agree(err);
+  } else {
+    read_inputs(a, in, cb, !a.quiet);
+  }
+  const AnimatableModel& model = in.model;
+  const std::vector<SkeletonPose>& poses = in.poses;
+  const std::vector<Eigen::MatrixX3d>& reference = in.reference;
+  const ClothObservations& obs = *in.obs;
+  const std::unique_ptr<ClothMaterial>& truth = in.truth;
+  const int frames = in.frames;
   ClothParameterEstimation est(model, poses, obs);
   if (!reference.empty()) est.setReferenceSequence(reference);
   est.setOptions(a.o);
+  if (ranks) est.setWorkShare(ranks->share);
   est.setProgressCallback([&](double x, const std::string& s) { return !cb || cb(0.1 + (a.landscape ? 0.6 : 0.9) * x, s); });
   const ClothEstimationResult r = est.estimate();
   AnimatableModel out = model;
@@ -194,6 +241,7 @@ int cmd_estimate(EstimateArgs a) {
     ClothParameterEstimation scan(out, poses, obs);  // the other regions at their estimates
     if (!reference.empty()) scan.setReferenceSequence(reference);
     scan.setOptions(a.o);
+    if (ranks) scan.setWorkShare(ranks->share);
     for (std::size_t b = 0; b < rhos.size(); b += 16) {
       const std::vector<ClothMaterial> part(rhos.begin() + long(b), rhos.begin() + long(std::min(rhos.size(), b + 16)));
       for (const ClothFitEnergy& e : scan.evaluate(0, part)) land.push_back(e.e_fit);
@@ -201,6 +249,7 @@ int cmd_estimate(EstimateArgs a) {
     }
   }
   bar.finish();
+  if (!lead) return 0;  // rank 0 writes
 
   make_out_dir(a.out);
   save_animatable_model((fs::path(a.out) / "estimated_model.json").string(), out);
@@ -214,6 +263,7 @@ int cmd_estimate(EstimateArgs a) {
   rep["window"] = a.o.window;
   rep["window_phases"] = a.o.window_phases;
   rep["observations"] = {{"boundary_pixels", obs.numBoundaryPixels()}, {"correspondences", obs.numCorrespondences()}, {"megabytes", obs.memoryBytes() / 1e6}};
+  rep["processes"] = ranks ? ranks->size : 1;
   rep["simulations"] = r.simulations;
   rep["seconds"] = r.seconds;
   nlohmann::json regions = nlohmann::json::array();
@@ -241,6 +291,35 @@ int cmd_estimate(EstimateArgs a) {
       std::printf("cloth estimate: region %d: d_n %.3f, d_t %.3f, k_bend %.3f (E_fit %.3f) after %d simulations in %.1f s -> %s\n", g.region, g.rho.d_n,
                   g.rho.d_t, g.rho.k_bend, g.energy.e_fit, g.simulations, g.seconds, a.out.c_str());
   return 0;
+}
+
+int cmd_estimate(const EstimateArgs& a) {
+#ifdef TBSP_WITH_MPI
+  if (launched_by_mpirun()) {
+    ClothRanks mpi;
+    if (mpi.size() > 1) {
+      Ranks ranks;
+      ranks.rank = mpi.rank();
+      ranks.size = mpi.size();
+      ranks.share = mpi.share();
+      ranks.agree = [&mpi](const std::exception_ptr& e) { mpi.agree(e); };
+      if (ranks.rank == 0) return run_estimate(a, &ranks);  // its error is printed by main()
+      // every rank has the same error (ClothRanks::agree and the work share): rank 0 prints it
+      try {
+        return run_estimate(a, &ranks);
+      } catch (const Cancelled&) {
+        return 130;
+      } catch (const InvalidInput&) {
+        return 2;
+      } catch (const NumericalFailure&) {
+        return 3;
+      } catch (const std::exception&) {
+        return 1;
+      }
+    }
+  }
+#endif
+  return run_estimate(a, nullptr);
 }
 
 }  // namespace

@@ -4,9 +4,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <condition_variable>
 #include <filesystem>
+#include <mutex>
 #include <random>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include <unistd.h>
 
@@ -216,4 +220,141 @@ TEST(ClothParameterEstimation, RestartPhasesScoreEveryShiftedWindow) {
   EXPECT_EQ(two.frames, 42);
   EXPECT_GT(two.rim_samples, one.rim_samples);
   EXPECT_NEAR(two.e_fit, one.e_fit, 0.25 * one.e_fit);
+}
+
+namespace {
+
+// In-process stand-in for MPI_Allreduce(MPI_SUM) among n threads: each deposits its vector, all
+// wait for the last, all get the elementwise sum.
+class ThreadAllreduce {
+public:
+  explicit ThreadAllreduce(int n) : n_(n) {}
+  void sum(std::vector<double>& v) {
+    std::unique_lock<std::mutex> lock(m_);
+    const long generation = generation_;
+    if (arrived_ == 0) acc_.assign(v.size(), 0.0);
+    if (acc_.size() != v.size()) mismatch_ = true;
+    for (std::size_t i = 0; i < v.size() && i < acc_.size(); ++i) acc_[i] += v[i];
+    if (++arrived_ == n_) {
+      result_ = acc_;
+      arrived_ = 0;
+      ++generation_;
+      cv_.notify_all();
+    } else {
+      cv_.wait(lock, [&] { return generation_ != generation; });
+    }
+    v = result_;
+  }
+  bool mismatch() const { return mismatch_; }
+
+private:
+  int n_, arrived_ = 0;
+  long generation_ = 0;
+  bool mismatch_ = false;
+  std::vector<double> acc_, result_;
+  std::mutex m_;
+  std::condition_variable cv_;
+};
+
+// Runs fn(rank, share) on n threads, each a "process" of one work share.
+template <class F>
+void as_processes(int n, ThreadAllreduce& net, F fn) {
+  std::vector<std::thread> t;
+  for (int r = 0; r < n; ++r)
+    t.emplace_back([&, r] {
+      ClothWorkShare share;
+      share.rank = r;
+      share.size = n;
+      share.sum = [&net](std::vector<double>& v) { net.sum(v); };
+      fn(r, share);
+    });
+  for (auto& x : t) x.join();
+}
+
+}  // namespace
+
+// The simulations shared among processes (ClothWorkShare, what `tbsp cloth estimate` does under
+// mpirun) give every process the energies one process computes, bit for bit (each simulation runs
+// on one process; the exchange adds zeros to it); an error in any simulation reaches every process
+// with its type and message, and a cancel on one process stops all of them.
+TEST(ClothParameterEstimation, ProcessesSharingTheSimulationsGetTheSameBitsAndTheSameErrors) {
+  const ClothMaterial truth{1.0, 10.0, 0.6};
+  TBSP_REQUIRE_FILE(std::string(TBSP_SHARED_DATA_DIR) + "/capture/dopomoc__BVH/02_05.bvh");
+  const SmallGt* g = small_gt(truth);
+  ASSERT_NE(g, nullptr);
+  const AnimatableModel model = synth::generating_model(g->gt.mannequin, g->gt.skeleton, ClothMaterial{}, g->gt.model.settings);
+  ClothParameterEstimation one(model, g->gt.poses, *g->obs);
+  one.setReferenceSequence(g->gt.frames);
+  const std::vector<ClothMaterial> rhos{truth, {4.0, 30.0, 0.3}};
+  const std::vector<ClothFitEnergy> want = one.evaluate(0, rhos);  // 2 samples x 3 windows
+  constexpr int kProcesses = 4;                                     // more processes than a sample has windows
+  ThreadAllreduce net(kProcesses);
+  std::vector<std::vector<ClothFitEnergy>> got(kProcesses);
+  as_processes(kProcesses, net, [&](int r, const ClothWorkShare& share) {
+    ClothParameterEstimation est(model, g->gt.poses, *g->obs);
+    est.setReferenceSequence(g->gt.frames);
+    est.setWorkShare(share);
+    got[std::size_t(r)] = est.evaluate(0, rhos);
+  });
+  EXPECT_FALSE(net.mismatch());
+  for (int r = 0; r < kProcesses; ++r) {
+    ASSERT_EQ(got[std::size_t(r)].size(), want.size());
+    for (std::size_t i = 0; i < want.size(); ++i) {
+      EXPECT_EQ(got[std::size_t(r)][i].e_fit, want[i].e_fit) << "process " << r << ", sample " << i;
+      EXPECT_EQ(got[std::size_t(r)][i].e_sil, want[i].e_sil);
+      EXPECT_EQ(got[std::size_t(r)][i].e_sift, want[i].e_sift);
+      EXPECT_EQ(got[std::size_t(r)][i].rim_samples, want[i].rim_samples);
+      EXPECT_EQ(got[std::size_t(r)][i].feature_samples, want[i].feature_samples);
+      EXPECT_EQ(got[std::size_t(r)][i].frames, want[i].frames);
+    }
+  }
+  // a material the simulator refuses: its first window's error, on every process (it ran on one)
+  const std::vector<ClothMaterial> bad{truth, {-1.0, 10.0, 0.6}};
+  std::string single;
+  try {
+    one.evaluate(0, bad);
+  } catch (const InvalidInput& e) {
+    single = e.what();
+  }
+  ASSERT_FALSE(single.empty()) << "a negative drag must be refused";
+  std::vector<std::string> messages(kProcesses);
+  as_processes(kProcesses, net, [&](int r, const ClothWorkShare& share) {
+    ClothParameterEstimation est(model, g->gt.poses, *g->obs);
+    est.setReferenceSequence(g->gt.frames);
+    est.setWorkShare(share);
+    try {
+      est.evaluate(0, bad);
+      messages[std::size_t(r)] = "no error";
+    } catch (const InvalidInput& e) {
+      messages[std::size_t(r)] = e.what();
+    } catch (const std::exception& e) {
+      messages[std::size_t(r)] = std::string("wrong type: ") + e.what();
+    }
+  });
+  for (int r = 0; r < kProcesses; ++r) EXPECT_EQ(messages[std::size_t(r)], single) << "process " << r;
+  // a cancel on process 1 only (after the first batch of the search): every process stops
+  std::vector<int> cancelled(kProcesses, 0);
+  as_processes(kProcesses, net, [&](int r, const ClothWorkShare& share) {
+    ClothParameterEstimation est(model, g->gt.poses, *g->obs);
+    est.setReferenceSequence(g->gt.frames);
+    ClothEstimationOptions o;
+    o.start_samples = 1;
+    o.max_evaluations = 3;
+    est.setOptions(o);
+    est.setWorkShare(share);
+    est.setProgressCallback([r](double, const std::string&) { return r != 1; });
+    try {
+      est.estimate();
+    } catch (const Cancelled&) {
+      cancelled[std::size_t(r)] = 1;
+    }
+  });
+  for (int r = 0; r < kProcesses; ++r) EXPECT_EQ(cancelled[std::size_t(r)], 1) << "process " << r;
+  // an invalid share
+  ClothWorkShare s;
+  s.rank = 2;
+  s.size = 2;
+  EXPECT_THROW(one.setWorkShare(s), InvalidInput);
+  s.rank = 0;
+  EXPECT_THROW(one.setWorkShare(s), InvalidInput);  // several processes without a sum
 }

@@ -96,21 +96,85 @@ void ClothParameterEstimation::checkRegion(int region) const {
 
 namespace {
 
-// f(i) for i in [0, n), in parallel when n > 1; an exception of any item is rethrown after the
-// loop (the one of the lowest index, with its type: a cancel stays a cancel).
-template <class F>
-void parallel_for_rethrow(long n, F&& f) {
-  std::vector<std::exception_ptr> err(static_cast<std::size_t>(std::max(n, 0L)));
-#pragma omp parallel for schedule(dynamic, 1) if (n > 1)
-  for (long i = 0; i < n; ++i) {
-    try {
-      f(i);
-    } catch (...) {
-      err[std::size_t(i)] = std::current_exception();
-    }
+// What one simulation window adds: sums over its scored frames.
+struct Partial {
+  double sum = 0, sil = 0, sift = 0;
+  long rim_samples = 0, feature_samples = 0;
+  int frames = 0;
+};
+
+// Error kinds exchanged between the processes of a work share (0: none).
+int error_kind(const std::exception_ptr& e) {
+  try {
+    std::rethrow_exception(e);
+  } catch (const Cancelled&) {
+    return 4;
+  } catch (const InvalidInput&) {
+    return 2;
+  } catch (const NumericalFailure&) {
+    return 3;
+  } catch (...) {
+    return 1;
   }
-  for (const std::exception_ptr& e : err)
-    if (e) std::rethrow_exception(e);
+}
+
+std::string error_message(const std::exception_ptr& e) {
+  try {
+    std::rethrow_exception(e);
+  } catch (const std::exception& x) {
+    return x.what();
+  } catch (...) {
+    return "unknown error";
+  }
+}
+
+std::exception_ptr error_of_kind(int kind, const std::string& msg) {
+  switch (kind) {
+    case 4: return std::make_exception_ptr(Cancelled(msg));
+    case 2: return std::make_exception_ptr(InvalidInput(msg));
+    case 3: return std::make_exception_ptr(NumericalFailure(msg));
+    default: return std::make_exception_ptr(Error(msg));
+  }
+}
+
+// A work share's exchange after each process ran its simulations: every process ends with every
+// simulation's terms (each computed by one process, 0 on the others: the sums are exact) and, if
+// any failed, with the lowest failed simulation's error — its type and its message (sent by the
+// process that ran it) — in its place.
+void share_results(const ClothWorkShare& share, std::vector<Partial>& part, std::vector<std::exception_ptr>& err) {
+  constexpr std::size_t kValues = 7;
+  std::vector<double> v(part.size() * kValues, 0.0);
+  for (std::size_t k = 0; k < part.size(); ++k) {
+    if (long(k) % share.size != share.rank) continue;
+    const Partial& p = part[k];
+    double* x = &v[k * kValues];
+    x[0] = p.sum, x[1] = p.sil, x[2] = p.sift, x[3] = double(p.rim_samples), x[4] = double(p.feature_samples), x[5] = p.frames;
+    x[6] = err[k] ? error_kind(err[k]) : 0;
+  }
+  share.sum(v);
+  long failed = -1;
+  for (std::size_t k = 0; k < part.size(); ++k) {
+    const double* x = &v[k * kValues];
+    part[k] = Partial{x[0], x[1], x[2], long(x[3]), long(x[4]), int(x[5])};
+    if (failed < 0 && x[6] != 0) failed = long(k);
+  }
+  if (failed < 0) return;
+  // the failed simulation's message, from the process that ran it, as character codes
+  constexpr std::size_t kChars = 1024;
+  std::vector<double> text(kChars, 0.0);
+  if (failed % share.size == share.rank) {
+    const std::string m = error_message(err[std::size_t(failed)]);
+    for (std::size_t i = 0; i < m.size() && i + 1 < kChars; ++i) text[i] = double(static_cast<unsigned char>(m[i]));
+  }
+  share.sum(text);
+  std::string msg;
+  for (double c : text) {
+    if (c == 0) break;
+    msg += char(static_cast<unsigned char>(c));
+  }
+  const int kind = int(v[std::size_t(failed) * kValues + 6]);
+  for (auto& e : err) e = nullptr;
+  err[std::size_t(failed)] = error_of_kind(kind, msg);
 }
 
 struct FrameTerms {
@@ -148,17 +212,29 @@ Camera crop_to_mesh(const Camera& cam, const Eigen::MatrixX3d& V, Eigen::Vector2
 
 }  // namespace
 
-ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMaterial& rho) const {
+void ClothParameterEstimation::setWorkShare(ClothWorkShare share) {
+  const std::string w = "[tbsp::ClothParameterEstimation] work share: ";
+  if (share.size < 1) throw InvalidInput(w + "size must be ≥ 1 (got " + std::to_string(share.size) + ")");
+  if (share.rank < 0 || share.rank >= share.size)
+    throw InvalidInput(w + "rank " + std::to_string(share.rank) + " is not in 0.." + std::to_string(share.size - 1));
+  if (share.size > 1 && !share.sum) throw InvalidInput(w + "several processes need a collective sum (MPI_Allreduce)");
+  share_ = std::move(share);
+}
+
+ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMaterial& rho) const { return evaluate(region, std::vector<ClothMaterial>{rho}).front(); }
+
+std::vector<ClothFitEnergy> ClothParameterEstimation::evaluate(int region, const std::vector<ClothMaterial>& rhos) const {
   checkRegion(region);
-  AnimatableModel m = model_;
-  m.materials[std::size_t(region)] = rho;  // validated by ModelAnimator below
-  const Eigen::Index nv = m.mesh.V.rows();
+  const Eigen::Index nv = model_.mesh.V.rows();
   std::vector<char> in_region(std::size_t(nv), 0);
   for (Eigen::Index i = 0; i < nv; ++i)
     in_region[std::size_t(i)] = inRegion(i, region);
-  std::vector<char> face_in(std::size_t(m.mesh.F.rows()), 0);
-  for (Eigen::Index f = 0; f < m.mesh.F.rows(); ++f)
-    face_in[std::size_t(f)] = in_region[std::size_t(m.mesh.F(f, 0))] && in_region[std::size_t(m.mesh.F(f, 1))] && in_region[std::size_t(m.mesh.F(f, 2))];
+  std::vector<char> face_in(std::size_t(model_.mesh.F.rows()), 0);
+  for (Eigen::Index f = 0; f < model_.mesh.F.rows(); ++f)
+    face_in[std::size_t(f)] = in_region[std::size_t(model_.mesh.F(f, 0))] && in_region[std::size_t(model_.mesh.F(f, 1))] && in_region[std::size_t(model_.mesh.F(f, 2))];
+  // one model per sample: the region's material replaced (validated by ModelAnimator below)
+  std::vector<AnimatableModel> models(rhos.size(), model_);
+  for (std::size_t i = 0; i < rhos.size(); ++i) models[i].materials[std::size_t(region)] = rhos[i];
 
   const auto& cams = obs_.cameras();
   const int views = obs_.numViews(), frames = obs_.numFrames(), stride = options_.frame_stride;
@@ -167,16 +243,10 @@ ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMateria
   if (W > 0 && !reference_)
     throw InvalidInput("[tbsp::ClothParameterEstimation] window = " + std::to_string(W) +
                        " restarts the simulation from the reference mesh sequence: call setReferenceSequence, or set window = 0 (the whole sequence)");
-  const double dt = m.settings.time_step;
-  // Sums over the evaluated frames of one window.
-  struct Partial {
-    double sum = 0, sil = 0, sift = 0;
-    long rim_samples = 0, feature_samples = 0;
-    int frames = 0;
-  };
+  const double dt = model_.settings.time_step;
   // Frames [n0, n1): one simulation restarted at n0 (from the reference with a window, else from
   // the settled first pose), rendered into every view and compared with the observations.
-  auto run = [&](int n0, int n1, Partial& e) {
+  auto run = [&](const AnimatableModel& m, int n0, int n1, Partial& e) {
     Rasterizer raster;
     std::vector<RenderBuffers> prev(static_cast<std::size_t>(views)), cur(static_cast<std::size_t>(views));
     std::vector<Eigen::Vector2i> prev_off(static_cast<std::size_t>(views)), cur_off(static_cast<std::size_t>(views));  // crop corners
@@ -247,9 +317,10 @@ ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMateria
       prev_valid = true;
     }
   };
-  // With a window the windows are independent simulations: run in parallel (when this is not
-  // already one of several samples evaluated in parallel), summed in window order, so the result
-  // does not depend on the thread count.
+  // With a window the windows are independent simulations. Every (sample, window) pair is one
+  // simulation: they run in parallel (and dealt over the processes of a work share), each
+  // sample's summed in window order, so the result depends on neither the thread nor the
+  // process count.
   // Windows [n0, n1): with P phases the window grid is laid P times, shifted by W·p/P frames (the
   // first window of a shifted grid is shorter), and every scored frame of every phase is averaged.
   std::vector<std::pair<int, int>> spans;
@@ -259,32 +330,45 @@ ClothFitEnergy ClothParameterEstimation::evaluate(int region, const ClothMateria
     if (shift > 0) spans.push_back({0, std::min(frames, shift)});
     for (int n0 = shift; n0 < frames; n0 += W) spans.push_back({n0, std::min(frames, n0 + W)});
   }
-  const int nwin = int(spans.size());
-  std::vector<Partial> part(static_cast<std::size_t>(nwin));
-  parallel_for_rethrow(nwin, [&](long w) { run(spans[std::size_t(w)].first, spans[std::size_t(w)].second, part[std::size_t(w)]); });
-  ClothFitEnergy e;
-  double sum = 0, sum_sil = 0, sum_sift = 0;
-  for (const Partial& p : part) {
-    sum += p.sum;
-    sum_sil += p.sil;
-    sum_sift += p.sift;
-    e.rim_samples += p.rim_samples;
-    e.feature_samples += p.feature_samples;
-    e.frames += p.frames;
+  const long nwin = long(spans.size()), items = long(rhos.size()) * nwin;
+  const int size = share_.size, rank = share_.rank;
+  std::vector<long> mine;  // the simulations this process runs
+  for (long k = 0; k < items; ++k)
+    if (k % size == rank) mine.push_back(k);
+  std::vector<Partial> part(static_cast<std::size_t>(items));
+  std::vector<std::exception_ptr> err(static_cast<std::size_t>(items));
+#pragma omp parallel for schedule(dynamic, 1) if (mine.size() > 1)
+  for (std::size_t q = 0; q < mine.size(); ++q) {
+    const long k = mine[q];
+    const auto& sp = spans[std::size_t(k % nwin)];
+    try {
+      run(models[std::size_t(k / nwin)], sp.first, sp.second, part[std::size_t(k)]);
+    } catch (...) {
+      err[std::size_t(k)] = std::current_exception();
+    }
   }
-  if (e.frames) {
-    e.e_fit = sum / e.frames;
-    e.e_sil = sum_sil / e.frames;
-    e.e_sift = sum_sift / e.frames;
-  }
-  return e;
-}
-
-std::vector<ClothFitEnergy> ClothParameterEstimation::evaluate(int region, const std::vector<ClothMaterial>& rhos) const {
-  checkRegion(region);
+  if (size > 1) share_results(share_, part, err);
+  for (const std::exception_ptr& e : err)  // the lowest simulation's error, with its type (a cancel stays a cancel)
+    if (e) std::rethrow_exception(e);
   std::vector<ClothFitEnergy> out(rhos.size());
-  // one sample: its windows run in parallel instead (a parallel region here would serialize them)
-  parallel_for_rethrow(long(rhos.size()), [&](long i) { out[std::size_t(i)] = evaluate(region, rhos[std::size_t(i)]); });
+  for (std::size_t i = 0; i < rhos.size(); ++i) {
+    ClothFitEnergy& e = out[i];
+    double sum = 0, sum_sil = 0, sum_sift = 0;
+    for (long w = 0; w < nwin; ++w) {
+      const Partial& p = part[std::size_t(long(i) * nwin + w)];
+      sum += p.sum;
+      sum_sil += p.sil;
+      sum_sift += p.sift;
+      e.rim_samples += p.rim_samples;
+      e.feature_samples += p.feature_samples;
+      e.frames += p.frames;
+    }
+    if (e.frames) {
+      e.e_fit = sum / e.frames;
+      e.e_sil = sum_sil / e.frames;
+      e.e_sift = sum_sift / e.frames;
+    }
+  }
   return out;
 }
 

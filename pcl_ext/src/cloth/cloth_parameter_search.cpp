@@ -55,15 +55,28 @@ ClothRegionEstimate ClothParameterEstimation::estimateRegion(int region, std::ve
       out.push_back(es[i].e_fit);
     }
     count += int(us.size());
-    if (progress_ && !progress_(std::min(1.0, double(count) / std::max(budget, 1)),
-                                "cloth region " + std::to_string(region) + ": " + std::to_string(count) + " simulations"))
-      throw Cancelled("[tbsp::ClothParameterEstimation] cancelled");
+    bool stop = progress_ && !progress_(std::min(1.0, double(count) / std::max(budget, 1)),
+                                        "cloth region " + std::to_string(region) + ": " + std::to_string(count) + " simulations");
+    if (share_.size > 1) {  // a cancel on any process stops every process here
+      std::vector<double> v{stop ? 1.0 : 0.0};
+      share_.sum(v);
+      stop = v[0] > 0;
+    }
+    if (stop) throw Cancelled("[tbsp::ClothParameterEstimation] cancelled");
     return out;
   });
   ClothRegionEstimate r;
   r.region = region;
   if (o.search == ClothSearch::Thesis) {
-    const Unit u = detail::thesis_search(energy, o.grid_k, o.greedy_samples, o.seed, batch_size());
+    // the greedy samples are drawn in batches of the threads of all processes (every process
+    // must draw the same batches)
+    int batch = batch_size();
+    if (share_.size > 1) {
+      std::vector<double> v{double(batch)};
+      share_.sum(v);
+      batch = int(v[0]);
+    }
+    const Unit u = detail::thesis_search(energy, o.grid_k, o.greedy_samples, o.seed, batch);
     r.rho = from_unit(u, o);
     r.energy = evaluate(region, r.rho);  // the mean particle was not simulated
     samples.push_back({region, r.rho, r.energy});

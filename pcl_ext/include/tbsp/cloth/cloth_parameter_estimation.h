@@ -23,8 +23,9 @@
 /// start design evaluated in parallel, then NLopt's BOBYQA (Powell's bound-constrained quadratic
 /// model, derivative-free) from its best sample, restarted from its end with a 4× smaller trust
 /// region (up to twice, while that improves) — 6.6× fewer simulations than the thesis' search, a
-/// nearer k_bend, E_fit within a few % of it (docs/cloth.md). Samples run in parallel (one simulation per thread; each is
-/// deterministic, so the result does not depend on the thread count).
+/// nearer k_bend, E_fit within a few % of it (docs/cloth.md). Samples and windows run in parallel (one simulation per
+/// thread; each is deterministic, so the result does not depend on the thread count), and over
+/// several processes with setWorkShare.
 ///
 /// Library: tbsp::multiview (links OpenCV and NLopt; libtbsp stays free of both).
 /// Cost: one simulation of the whole sequence plus one rendering of every view per evaluated
@@ -32,6 +33,7 @@
 /// invalid options or model), Cancelled (progress callback returned false).
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -113,6 +115,23 @@ struct ClothEstimationResult {
   double seconds = 0;
 };
 
+/// Sharing the simulations among cooperating processes (MPI ranks: `tbsp cloth estimate` under
+/// mpirun). Every process runs the same estimation; the simulations of each evaluation — one per
+/// (sample, window) — are dealt round-robin: process `rank` runs those whose index ≡ rank
+/// (mod size), on its own threads, and `sum` combines the processes' results, so every process
+/// goes on with all of them: bit for bit what one process computes, whatever the process and
+/// thread counts. An error in any simulation is thrown on every process, with the same type and
+/// message; so is a cancel (the progress callback returning false on any process).
+struct ClothWorkShare {
+  int rank = 0;  ///< this process, 0..size − 1
+  int size = 1;  ///< cooperating processes, ≥ 1
+  /// Collective, needed when size > 1: every process calls it at the same point with a vector of
+  /// the same length; on return each holds the elementwise sum over all processes
+  /// (MPI_Allreduce with MPI_SUM). Entries a process did not compute are 0 on it, so the sums are
+  /// exact.
+  std::function<void(std::vector<double>&)> sum;
+};
+
 class ClothParameterEstimation {
 public:
   using Options = ClothEstimationOptions;
@@ -131,6 +150,9 @@ public:
   void setOptions(const ClothEstimationOptions& o);
   const ClothEstimationOptions& options() const { return options_; }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
+  /// \brief Shares the simulations with other processes (ClothWorkShare; default: one process).
+  /// \throws InvalidInput when rank is not in 0..size − 1, size < 1, or size > 1 without `sum`.
+  void setWorkShare(ClothWorkShare share);
 
   int numRegions() const { return static_cast<int>(model_.materials.size()); }
   /// Vertices of region r's cloth (δ ≥ clothness_min).
@@ -138,7 +160,8 @@ public:
 
   /// E_fit of one material for region `region` (the other regions keep `model`'s): one simulation.
   ClothFitEnergy evaluate(int region, const ClothMaterial& rho) const;
-  /// Several samples in parallel (one thread each). Output in input order.
+  /// Several samples: their simulations (one per sample and window) run in parallel, one per
+  /// thread (and shared over the processes of setWorkShare). Output in input order.
   std::vector<ClothFitEnergy> evaluate(int region, const std::vector<ClothMaterial>& rhos) const;
 
   /// Estimates every region in turn (each with the earlier regions at their estimates).
@@ -155,6 +178,7 @@ private:
   const ClothObservations& obs_;
   ClothEstimationOptions options_;
   ProgressCallback progress_;
+  ClothWorkShare share_;
 };
 
 }  // namespace tbsp

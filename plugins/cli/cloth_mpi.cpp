@@ -1,0 +1,96 @@
+// `tbsp cloth estimate` under mpirun (docs/cloth.md, "Several processes"): every rank runs the
+// same estimation and computes its share of the simulations; the ranks' results are summed with
+// MPI_Allreduce. Built only with Open MPI (TBSP_WITH_MPI).
+// the C API only (Open MPI / MPICH would otherwise pull in their deprecated C++ bindings)
+#define OMPI_SKIP_MPICXX 1
+#define MPICH_SKIP_MPICXX 1
+#include <mpi.h>
+
+#include <string>
+#include <vector>
+
+#include "cloth_mpi.h"
+#include "tbsp/core/error.h"
+
+namespace tbsp::cli {
+namespace {
+
+int kind_of(const std::exception_ptr& e) {
+  try {
+    std::rethrow_exception(e);
+  } catch (const Cancelled&) {
+    return 4;
+  } catch (const InvalidInput&) {
+    return 2;
+  } catch (const NumericalFailure&) {
+    return 3;
+  } catch (...) {
+    return 1;
+  }
+}
+
+std::string message_of(const std::exception_ptr& e) {
+  try {
+    std::rethrow_exception(e);
+  } catch (const std::exception& x) {
+    return x.what();
+  } catch (...) {
+    return "unknown error";
+  }
+}
+
+void all_sum(std::vector<double>& v) {
+  if (!v.empty()) MPI_Allreduce(MPI_IN_PLACE, v.data(), int(v.size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+}
+
+}  // namespace
+
+ClothRanks::ClothRanks() {
+  int provided = 0;
+  MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
+  MPI_Comm_size(MPI_COMM_WORLD, &size_);
+}
+
+ClothRanks::~ClothRanks() { MPI_Finalize(); }
+
+ClothWorkShare ClothRanks::share() const {
+  ClothWorkShare s;
+  s.rank = rank_;
+  s.size = size_;
+  s.sum = all_sum;
+  return s;
+}
+
+void ClothRanks::agree(const std::exception_ptr& local) const {
+  // per rank: its error kind (0 = none)
+  std::vector<double> kinds(std::size_t(size_), 0.0);
+  kinds[std::size_t(rank_)] = local ? kind_of(local) : 0;
+  all_sum(kinds);
+  int failed = -1;
+  for (int r = 0; r < size_ && failed < 0; ++r)
+    if (kinds[std::size_t(r)] != 0) failed = r;
+  if (failed < 0) return;
+  // the failing rank's message, as character codes
+  constexpr std::size_t kChars = 2048;
+  std::vector<double> text(kChars, 0.0);
+  if (failed == rank_) {
+    const std::string m = message_of(local);
+    for (std::size_t i = 0; i < m.size() && i + 1 < kChars; ++i) text[i] = double(static_cast<unsigned char>(m[i]));
+  }
+  all_sum(text);
+  std::string msg;
+  for (double c : text) {
+    if (c == 0) break;
+    msg += char(static_cast<unsigned char>(c));
+  }
+  if (failed != 0) msg = "(rank " + std::to_string(failed) + " of " + std::to_string(size_) + ") " + msg;
+  switch (int(kinds[std::size_t(failed)])) {
+    case 4: throw Cancelled(msg);
+    case 2: throw InvalidInput(msg);
+    case 3: throw NumericalFailure(msg);
+    default: throw Error(msg);
+  }
+}
+
+}  // namespace tbsp::cli
