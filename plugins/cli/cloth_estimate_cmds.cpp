@@ -44,7 +44,9 @@ struct EstimateArgs {
 };
 
 void add_estimate(CLI::App& cloth, EstimateArgs& a, CLI::App*& sub) {
-  sub = cloth.add_subcommand("estimate", "cloth materials (d_n, d_t, k_bend) of a model from a studio recording (thesis §10.7)");
+  sub = cloth.add_subcommand("estimate",
+                             "cloth materials (d_n, d_t, k_bend) of a model from a studio recording (thesis §10.7); under mpirun the simulations "
+                             "are shared over the ranks (the same result, bit for bit)");
   sub->add_option("--model", a.model, "model JSON from `tbsp cloth build`")->required();
   sub->add_option("--studio", a.studio, "studio.yaml of the recording (images + silhouettes of every frame)")->required();
   sub->add_option("--bvh", a.bvh, "the recorded skeleton motion (the model's joint names)")->required();
@@ -298,6 +300,7 @@ int cmd_estimate(const EstimateArgs& a) {
   if (launched_by_mpirun()) {
     ClothRanks mpi;
     if (mpi.size() > 1) {
+      mpi.shareCores();
       Ranks ranks;
       ranks.rank = mpi.rank();
       ranks.size = mpi.size();

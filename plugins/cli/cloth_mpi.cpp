@@ -6,8 +6,14 @@
 #define MPICH_SKIP_MPICXX 1
 #include <mpi.h>
 
+#include <algorithm>
+#include <cstdlib>
 #include <string>
 #include <vector>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 #include "cloth_mpi.h"
 #include "tbsp/core/error.h"
@@ -50,6 +56,19 @@ ClothRanks::ClothRanks() {
   MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
   MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
   MPI_Comm_size(MPI_COMM_WORLD, &size_);
+  MPI_Comm node;
+  MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, rank_, MPI_INFO_NULL, &node);
+  MPI_Comm_size(node, &local_size_);
+  MPI_Comm_free(&node);
+}
+
+int ClothRanks::shareCores() const {
+#ifdef _OPENMP
+  if (!std::getenv("OMP_NUM_THREADS")) omp_set_num_threads(std::max(1, omp_get_num_procs() / std::max(1, local_size_)));
+  return omp_get_max_threads();
+#else
+  return 1;
+#endif
 }
 
 ClothRanks::~ClothRanks() { MPI_Finalize(); }

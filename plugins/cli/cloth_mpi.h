@@ -17,6 +17,12 @@ public:
   ClothRanks& operator=(const ClothRanks&) = delete;
   int rank() const { return rank_; }
   int size() const { return size_; }
+  /// Ranks on this node (MPI_Comm_split_type, shared memory).
+  int localSize() const { return local_size_; }
+  /// Unless OMP_NUM_THREADS is set: this rank's OpenMP threads = the node's cores / its ranks
+  /// (mpirun starts every rank with all cores; 2 ranks × 2 threads on 2 cores only contend).
+  /// Returns the threads this rank uses.
+  int shareCores() const;
   /// The work share over the ranks: the sum is MPI_Allreduce(MPI_SUM) on MPI_COMM_WORLD.
   ClothWorkShare share() const;
   /// Collective: returns when no rank has an error; otherwise every rank throws the error of the
@@ -26,7 +32,7 @@ public:
   void agree(const std::exception_ptr& local) const;
 
 private:
-  int rank_ = 0, size_ = 1;
+  int rank_ = 0, size_ = 1, local_size_ = 1;
 };
 
 }  // namespace tbsp::cli
