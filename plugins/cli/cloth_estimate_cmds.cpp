@@ -144,7 +144,7 @@ struct EstimateInputs {
   int frames = 0;
 };
 
-void read_inputs(EstimateArgs& a, EstimateInputs& in, const ProgressCallback& cb, bool speak) {
+void read_inputs(EstimateArgs& a, EstimateInputs& in, const ProgressCallback& cb, bool speak, int rank, int nproc) {
   in.model = load_animatable_model(a.model);
   const AnimatableModel& model = in.model;
   const Studio studio = read_studio(a.studio);
@@ -176,16 +176,27 @@ void read_inputs(EstimateArgs& a, EstimateInputs& in, const ProgressCallback& cb
   std::string why;
   if (!a.o.isValid(&why)) throw InvalidInput(why);  // fail before reading the studio
 
+  // this rank's part of the frames (all of them on one process): [f0, f1), with the features of
+  // frame f0 − 1 for the correspondences into f0
   in.obs = std::make_unique<ClothObservations>(studio.cameraList());
   ClothObservations& obs = *in.obs;
-  StudioFrameStream stream(studio, {});
+  const int f0 = int(long(frames) * rank / nproc), f1 = int(long(frames) * (rank + 1) / nproc);
+  if (f1 <= f0) return;
+  StudioFrameStream::Options so;
+  so.first = studio.first_frame + std::max(f0 - 1, 0);
+  so.last = studio.first_frame + f1 - 1;
+  StudioFrameStream stream(studio, so);
   StudioFrame fr;
   while (stream.next(fr)) {
     for (std::size_t c = 0; c < fr.images.size(); ++c)
       if (fr.images[c].empty())
         throw InvalidInput("'" + a.studio + "': camera '" + studio.cameras[c].camera.name() + "' has no images: the estimation needs the video of every camera");
+    if (fr.frame < studio.first_frame + f0) {
+      obs.primeFrame(fr.images, fr.silhouettes);
+      continue;
+    }
     obs.addFrame(fr.images, fr.silhouettes);
-    report_progress(cb, 0.1 * obs.numFrames() / frames, "features and silhouettes");
+    report_progress(cb, 0.1 * obs.numFrames() / (f1 - f0), "features and silhouettes");
   }
 }
 
@@ -195,6 +206,7 @@ struct Ranks {
   int rank = 0, size = 1;
   ClothWorkShare share;
   std::function<void(const std::exception_ptr&)> agree;
+  std::function<std::vector<std::string>(const std::string&)> allgather;
 };
 
 // The estimation on one process (ranks: null) or as one rank of several (every rank computes its
@@ -207,13 +219,17 @@ int run_estimate(EstimateArgs a, const Ranks* ranks) {
   if (ranks) {  // every rank reads on its own: a rank that fails alone must stop the others too
     std::exception_ptr err;
     try {
-      read_inputs(a, in, cb, !a.quiet && lead);
+      read_inputs(a, in, cb, !a.quiet && lead, ranks->rank, ranks->size);
     } catch (...) {
       err = std::current_exception();
     }
     ranks->agree(err);
+    // the ranks' parts of the observations, appended in frame order: what one pass gives
+    std::unique_ptr<ClothObservations> all = std::make_unique<ClothObservations>(in.obs->cameras(), in.obs->options());
+    for (const std::string& part : ranks->allgather(in.obs->serialize())) all->append(part);
+    in.obs = std::move(all);
   } else {
-    read_inputs(a, in, cb, !a.quiet);
+    read_inputs(a, in, cb, !a.quiet, 0, 1);
   }
   const AnimatableModel& model = in.model;
   const std::vector<SkeletonPose>& poses = in.poses;
@@ -306,6 +322,7 @@ int cmd_estimate(const EstimateArgs& a) {
       ranks.size = mpi.size();
       ranks.share = mpi.share();
       ranks.agree = [&mpi](const std::exception_ptr& e) { mpi.agree(e); };
+      ranks.allgather = [&mpi](const std::string& mine) { return mpi.allgather(mine); };
       if (ranks.rank == 0) return run_estimate(a, &ranks);  // its error is printed by main()
       // every rank has the same error (ClothRanks::agree and the work share): rank 0 prints it
       try {

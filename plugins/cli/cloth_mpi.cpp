@@ -7,6 +7,7 @@
 #include <mpi.h>
 
 #include <algorithm>
+#include <climits>
 #include <cstdlib>
 #include <string>
 #include <vector>
@@ -110,6 +111,29 @@ void ClothRanks::agree(const std::exception_ptr& local) const {
     case 3: throw NumericalFailure(msg);
     default: throw Error(msg);
   }
+}
+
+std::vector<std::string> ClothRanks::allgather(const std::string& mine) const {
+  // sizes first (as doubles through the sum: exact below 2^53), then the bytes
+  std::vector<double> sizes(std::size_t(size_), 0.0);
+  sizes[std::size_t(rank_)] = double(mine.size());
+  all_sum(sizes);
+  const std::size_t n = static_cast<std::size_t>(size_);
+  std::vector<int> counts(n), displs(n);
+  double total = 0;
+  for (int r = 0; r < size_; ++r) {
+    displs[std::size_t(r)] = int(total);
+    counts[std::size_t(r)] = int(sizes[std::size_t(r)]);
+    total += sizes[std::size_t(r)];
+  }
+  if (total > double(INT_MAX))
+    throw InvalidInput("the observations of all ranks (" + std::to_string(total / 1e9) +
+                       " GB) exceed one MPI message (2 GB): estimate from fewer frames or views per run");
+  std::string all(std::size_t(total), '\0');
+  MPI_Allgatherv(mine.data(), int(mine.size()), MPI_CHAR, all.data(), counts.data(), displs.data(), MPI_CHAR, MPI_COMM_WORLD);
+  std::vector<std::string> out;
+  for (int r = 0; r < size_; ++r) out.push_back(all.substr(std::size_t(displs[std::size_t(r)]), std::size_t(counts[std::size_t(r)])));
+  return out;
 }
 
 }  // namespace tbsp::cli

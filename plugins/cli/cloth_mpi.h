@@ -2,6 +2,8 @@
 // `tbsp cloth estimate` under mpirun: the estimation's simulations shared over the ranks
 // (ClothWorkShare; cloth_mpi.cpp, only in builds with Open MPI).
 #include <exception>
+#include <string>
+#include <vector>
 
 #include "tbsp/cloth/cloth_parameter_estimation.h"
 
@@ -30,6 +32,9 @@ public:
   /// Used after the steps each rank runs on its own (reading the inputs), so that a rank that
   /// failed alone does not leave the others waiting in the estimation's exchanges.
   void agree(const std::exception_ptr& local) const;
+  /// Collective: every rank's bytes, in rank order, on every rank (MPI_Allgatherv).
+  /// \throws InvalidInput when the bytes of all ranks exceed one MPI message (2 GB).
+  std::vector<std::string> allgather(const std::string& mine) const;
 
 private:
   int rank_ = 0, size_ = 1, local_size_ = 1;

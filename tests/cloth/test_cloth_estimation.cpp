@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <condition_variable>
+#include <cstring>
 #include <filesystem>
 #include <mutex>
 #include <random>
@@ -97,6 +98,65 @@ TEST(ClothObservations, BadFramesAreRejectedWithTheCameraNamed) {
   ClothObservationOptions bad;
   bad.ratio = 0;
   EXPECT_THROW(ClothObservations({test_camera()}, bad), InvalidInput);
+}
+
+// Parts of a recording observed apart (ranks of `tbsp cloth estimate` under mpirun): frames 0–2
+// in one object, frame 2 primed and frames 3–5 in another, serialized and appended, give what one
+// pass over the six frames gives, bit for bit; malformed bytes are refused.
+TEST(ClothObservations, PartsObservedApartAndAppendedEqualOnePass) {
+  const int w = 200, h = 160;
+  const std::vector<Camera> cams{test_camera(w, h), test_camera(w, h)};
+  const cv::Mat tex = texture(w + 40, h + 40, 11);
+  std::vector<std::vector<cv::Mat>> img(6), sil(6);
+  for (int f = 0; f < 6; ++f)
+    for (int c = 0; c < 2; ++c) {
+      img[std::size_t(f)].push_back(tex(cv::Rect(20 - 2 * f + c, 20 - f, w, h)).clone());  // the texture moves
+      sil[std::size_t(f)].push_back(disc(w, h, {100 + 3 * f, 80 + c}, 50 + f));
+    }
+  ClothObservations one(cams), a(cams), b(cams);
+  for (int f = 0; f < 6; ++f) one.addFrame(img[std::size_t(f)], sil[std::size_t(f)]);
+  for (int f = 0; f < 3; ++f) a.addFrame(img[std::size_t(f)], sil[std::size_t(f)]);
+  b.primeFrame(img[2], sil[2]);
+  EXPECT_EQ(b.numFrames(), 0);
+  for (int f = 3; f < 6; ++f) b.addFrame(img[std::size_t(f)], sil[std::size_t(f)]);
+  EXPECT_THROW(b.primeFrame(img[2], sil[2]), InvalidInput);  // only before the first frame
+  ClothObservations all(cams);
+  all.append(a.serialize());
+  all.append(b.serialize());
+  ASSERT_EQ(all.numFrames(), 6);
+  EXPECT_EQ(all.numBoundaryPixels(), one.numBoundaryPixels());
+  EXPECT_EQ(all.numCorrespondences(), one.numCorrespondences());
+  EXPECT_GT(one.correspondences(3, 1).size(), 10u);  // frame 3's come from the primed frame 2
+  for (int f = 0; f < 6; ++f)
+    for (int c = 0; c < 2; ++c) {
+      const auto& p = all.correspondences(f, c);
+      const auto& q = one.correspondences(f, c);
+      ASSERT_EQ(p.size(), q.size()) << "frame " << f << ", view " << c;
+      for (std::size_t i = 0; i < p.size(); ++i) {
+        EXPECT_EQ(p[i].from, q[i].from);
+        EXPECT_EQ(p[i].to, q[i].to);
+      }
+      for (const Eigen::Vector2d& x : {Eigen::Vector2d(100, 80), Eigen::Vector2d(3, 150), Eigen::Vector2d(170.3, 41.7)})
+        EXPECT_EQ(all.boundaryDistance(f, c, x), one.boundaryDistance(f, c, x));
+    }
+  EXPECT_THROW(all.addFrame(img[0], sil[0]), InvalidInput);  // after append: add to the parts
+  // malformed bytes: each refused, nothing appended
+  const std::string good = a.serialize();
+  ClothObservations into(cams);
+  EXPECT_THROW(into.append(""), InvalidInput);
+  EXPECT_THROW(into.append("TBSPOBS0" + good.substr(8)), InvalidInput);  // another header
+  for (std::size_t cut : {std::size_t(9), std::size_t(16), good.size() / 2, good.size() - 1})
+    EXPECT_THROW(into.append(good.substr(0, cut)), InvalidInput) << "cut at " << cut;
+  EXPECT_THROW(into.append(good + "x"), InvalidInput);  // trailing bytes
+  std::string huge = good;
+  const std::uint32_t many = 0xFFFFFFF0u;
+  std::memcpy(&huge[12], &many, sizeof many);  // frame count beyond the data
+  EXPECT_THROW(into.append(huge), InvalidInput);
+  ClothObservations three({test_camera(w, h), test_camera(w, h), test_camera(w, h)});
+  EXPECT_THROW(three.append(good), InvalidInput);  // another view count
+  EXPECT_EQ(into.numFrames(), 0);
+  into.append(good);
+  EXPECT_EQ(into.numFrames(), 3);
 }
 
 namespace {

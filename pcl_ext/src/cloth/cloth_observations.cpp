@@ -1,6 +1,8 @@
 #include "tbsp/cloth/cloth_observations.h"
 
 #include <cassert>
+#include <cstdint>
+#include <cstring>
 #include <cmath>
 #include <limits>
 
@@ -73,7 +75,8 @@ std::vector<FeaturePair> match_pairs(const detail::ViewFeatures& a, const detail
 
 struct ClothObservations::Impl {
   std::vector<std::vector<ViewFrame>> frames;       // [frame][view]
-  std::vector<detail::ViewFeatures> last_features;  // of the last frame added, per view
+  std::vector<detail::ViewFeatures> last_features;  // of the last frame added (or primed), per view
+  bool assembled = false;                           // frames were appended (append)
 };
 
 ClothObservations::ClothObservations(std::vector<Camera> cameras, ClothObservationOptions options)
@@ -86,9 +89,7 @@ ClothObservations::~ClothObservations() = default;
 ClothObservations::ClothObservations(ClothObservations&&) noexcept = default;
 ClothObservations& ClothObservations::operator=(ClothObservations&&) noexcept = default;
 
-void ClothObservations::addFrame(const std::vector<cv::Mat>& images, const std::vector<cv::Mat>& silhouettes) {
-  const int n = numFrames();
-  const std::string w = "[tbsp::ClothObservations] frame " + std::to_string(n) + ": ";
+void ClothObservations::checkFrame(const std::vector<cv::Mat>& images, const std::vector<cv::Mat>& silhouettes, const std::string& w) const {
   const std::size_t k = cameras_.size();
   if (images.size() != k || silhouettes.size() != k)
     throw InvalidInput(w + "one image and one silhouette per camera are needed (" + std::to_string(k) + " cameras, " + std::to_string(images.size()) +
@@ -101,6 +102,27 @@ void ClothObservations::addFrame(const std::vector<cv::Mat>& images, const std::
     if (silhouettes[c].empty() || silhouettes[c].cols != cam.width() || silhouettes[c].rows != cam.height() || silhouettes[c].type() != CV_8U)
       throw InvalidInput(w + "camera '" + cam.name() + "': the silhouette must be 8-bit and " + size + " (the calibrated size)");
   }
+}
+
+void ClothObservations::primeFrame(const std::vector<cv::Mat>& images, const std::vector<cv::Mat>& silhouettes) {
+  const std::string w = "[tbsp::ClothObservations] primeFrame: ";
+  if (numFrames() > 0 || impl_->assembled) throw InvalidInput(w + "only before the first addFrame (it is the frame before the first one)");
+  checkFrame(images, silhouettes, w);
+  const std::size_t k = cameras_.size();
+  std::vector<detail::ViewFeatures> feats(k);
+#pragma omp parallel for schedule(dynamic)
+  for (long c = 0; c < long(k); ++c)
+    feats[std::size_t(c)] = detail::detect_features(images[std::size_t(c)], silhouettes[std::size_t(c)], options_.max_features);
+  impl_->last_features = std::move(feats);
+}
+
+void ClothObservations::addFrame(const std::vector<cv::Mat>& images, const std::vector<cv::Mat>& silhouettes) {
+  const int n = numFrames();
+  const std::string w = "[tbsp::ClothObservations] frame " + std::to_string(n) + ": ";
+  if (impl_->assembled) throw InvalidInput(w + "frames cannot be added after append(): add the frames to the parts, then append the parts");
+  checkFrame(images, silhouettes, w);
+  const std::size_t k = cameras_.size();
+  const bool match = !impl_->last_features.empty();  // the previous frame (or the primed one)
   std::vector<ViewFrame> views(k);
   std::vector<detail::ViewFeatures> feats(k);
   std::vector<std::string> errors(k);
@@ -116,7 +138,7 @@ void ClothObservations::addFrame(const std::vector<cv::Mat>& images, const std::
     vf.tree = std::make_unique<BoundaryTree>(2, vf.boundary, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     vf.tree->buildIndex();
     feats[std::size_t(c)] = detail::detect_features(images[std::size_t(c)], silhouettes[std::size_t(c)], options_.max_features);
-    if (n > 0) vf.pairs = match_pairs(impl_->last_features[std::size_t(c)], feats[std::size_t(c)], options_);
+    if (match) vf.pairs = match_pairs(impl_->last_features[std::size_t(c)], feats[std::size_t(c)], options_);
   }
   for (const std::string& e : errors)
     if (!e.empty()) throw InvalidInput(e);
@@ -160,6 +182,100 @@ std::size_t ClothObservations::numCorrespondences() const {
 std::size_t ClothObservations::memoryBytes() const {
   // boundary points + the k-d tree's index (~1 index per point plus nodes) + pairs
   return numBoundaryPixels() * (sizeof(Eigen::Vector2f) + 2 * sizeof(std::size_t)) + numCorrespondences() * sizeof(FeaturePair);
+}
+
+namespace {
+
+constexpr char kMagic[8] = {'T', 'B', 'S', 'P', 'O', 'B', 'S', '1'};
+
+template <class T>
+void put(std::string& out, const T& v) {
+  out.append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+
+// Reads from a byte string with bounds checks; every failure is one InvalidInput.
+struct Reader {
+  const std::string& s;
+  std::size_t at = 0;
+  template <class T>
+  T get(const char* what) {
+    T v;
+    if (s.size() - at < sizeof v)
+      throw InvalidInput("[tbsp::ClothObservations] append: the bytes end inside " + std::string(what) + " (at byte " + std::to_string(at) + " of " +
+                         std::to_string(s.size()) + "): not a complete serialization");
+    std::memcpy(&v, s.data() + at, sizeof v);
+    at += sizeof v;
+    return v;
+  }
+  // a count of items of `item_bytes` each that must fit in the rest of the bytes
+  std::uint32_t count(std::size_t item_bytes, const char* what) {
+    const std::uint32_t n = get<std::uint32_t>(what);
+    if (std::size_t(n) > (s.size() - at) / item_bytes)
+      throw InvalidInput("[tbsp::ClothObservations] append: " + std::string(what) + " count " + std::to_string(n) + " is beyond the " +
+                         std::to_string(s.size() - at) + " bytes left: not a serialization of ClothObservations");
+    return n;
+  }
+};
+
+}  // namespace
+
+std::string ClothObservations::serialize() const {
+  std::string out(kMagic, sizeof kMagic);
+  put(out, std::uint32_t(numViews()));
+  put(out, std::uint32_t(numFrames()));
+  for (const auto& f : impl_->frames)
+    for (const ViewFrame& v : f) {
+      put(out, std::uint32_t(v.boundary.pts.size()));
+      for (const Eigen::Vector2f& p : v.boundary.pts) put(out, p.x()), put(out, p.y());
+      put(out, std::uint32_t(v.pairs.size()));
+      for (const FeaturePair& q : v.pairs) put(out, q.from.x()), put(out, q.from.y()), put(out, q.to.x()), put(out, q.to.y());
+    }
+  return out;
+}
+
+void ClothObservations::append(const std::string& bytes) {
+  const std::string w = "[tbsp::ClothObservations] append: ";
+  if (bytes.size() < sizeof kMagic || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0)
+    throw InvalidInput(w + "the bytes do not start with the ClothObservations header: not a serialization of ClothObservations");
+  Reader r{bytes, sizeof kMagic};
+  const std::uint32_t views = r.get<std::uint32_t>("the view count");
+  if (int(views) != numViews())
+    throw InvalidInput(w + "the bytes hold " + std::to_string(views) + " views, these observations " + std::to_string(numViews()) +
+                       ": append parts of the same studio");
+  const std::uint32_t frames = r.count(std::size_t(views) * 2 * sizeof(std::uint32_t), "frame");
+  std::vector<std::vector<ViewFrame>> add(frames);
+  for (auto& f : add) {
+    f.resize(views);
+    for (ViewFrame& v : f) {
+      const std::uint32_t nb = r.count(2 * sizeof(float), "boundary pixel");
+      if (nb == 0) throw InvalidInput(w + "a view without boundary pixels: not a serialization of ClothObservations (every view has some)");
+      v.boundary.pts.resize(nb);
+      for (Eigen::Vector2f& p : v.boundary.pts) {
+        p.x() = r.get<float>("a boundary pixel");
+        p.y() = r.get<float>("a boundary pixel");
+      }
+      const std::uint32_t np = r.count(4 * sizeof(float), "correspondence");
+      v.pairs.resize(np);
+      for (FeaturePair& q : v.pairs) {
+        q.from.x() = r.get<float>("a correspondence");
+        q.from.y() = r.get<float>("a correspondence");
+        q.to.x() = r.get<float>("a correspondence");
+        q.to.y() = r.get<float>("a correspondence");
+      }
+    }
+  }
+  if (r.at != bytes.size())
+    throw InvalidInput(w + std::to_string(bytes.size() - r.at) + " bytes after the last frame: not a serialization of ClothObservations");
+  for (auto& f : add)
+    for (ViewFrame& v : f) {
+      for (const Eigen::Vector2f& p : v.boundary.pts)
+        if (!p.allFinite()) throw InvalidInput(w + "a boundary pixel is not finite: not a serialization of ClothObservations");
+      v.tree = std::make_unique<BoundaryTree>(2, v.boundary, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+      v.tree->buildIndex();
+    }
+  for (auto& f : add) impl_->frames.push_back(std::move(f));
+  impl_->last_features.clear();
+  impl_->assembled = true;
 }
 
 }  // namespace tbsp

@@ -52,6 +52,21 @@ public:
   /// image or an empty silhouette (the cloth estimation needs the performer in every view).
   void addFrame(const std::vector<cv::Mat>& images, const std::vector<cv::Mat>& silhouettes);
 
+  /// \brief Parts of a recording computed apart (several processes: `tbsp cloth estimate` under
+  /// mpirun): the frame just before this object's first one, of which only the features are
+  /// kept, so that the first addFrame() gets its correspondences as in one pass over the whole
+  /// recording. Only before the first addFrame(). Same checks as addFrame().
+  void primeFrame(const std::vector<cv::Mat>& images, const std::vector<cv::Mat>& silhouettes);
+  /// \brief This object's frames as bytes (boundary pixels and correspondences of every view),
+  /// for append() on another process. Little-endian binary; O(boundary pixels + correspondences).
+  std::string serialize() const;
+  /// \brief Appends the frames another object of the same cameras serialized: the parts of a
+  /// recording, appended in frame order, give what one pass over it gives (the same distances and
+  /// correspondences, bit for bit). addFrame() cannot follow (the features of the last frame are
+  /// not in the bytes). \throws InvalidInput on bytes that are not such a serialization (wrong
+  /// header, another view count, truncated, counts beyond the data).
+  void append(const std::string& bytes);
+
   int numFrames() const;
   int numViews() const { return static_cast<int>(cameras_.size()); }
   const std::vector<Camera>& cameras() const { return cameras_; }
@@ -68,6 +83,7 @@ public:
   std::size_t memoryBytes() const;
 
 private:
+  void checkFrame(const std::vector<cv::Mat>& images, const std::vector<cv::Mat>& silhouettes, const std::string& where) const;
   struct Impl;
   std::vector<Camera> cameras_;
   ClothObservationOptions options_;
