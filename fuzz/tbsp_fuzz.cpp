@@ -36,6 +36,8 @@
 #include "tbsp/plugins/fit_json.h"
 #include "tbsp/plugins/json_file.h"
 #include "tbsp/plugins/marker_map_json.h"
+#include "tbsp/cloth/cloth_observations.h"
+#include "tbsp/multiview/camera.h"
 #include "tbsp/plugins/cloth_model_json.h"
 #include "tbsp/plugins/pipeline.h"
 #include "tbsp/plugins/tet_job_json.h"
@@ -149,6 +151,21 @@ const std::map<std::string, Target>& targets() {
       {"texture", {"t.json", [](const std::string& p) { parse_texture_constraints(load_json_file(p), p); }}},
       {"marker_map", {"map.json", [](const std::string& p) { load_marker_map_json(p); }}},
       {"cloth_model", {"model.json", [](const std::string& p) { load_animatable_model(p); }}},
+      // the bytes the ranks of `tbsp cloth estimate` under mpirun exchange (two 64×48 views)
+      {"cloth_observations", {"obs.bin", [](const std::string& p) {
+                                std::ifstream in(p, std::ios::binary);
+                                const std::string bytes((std::istreambuf_iterator<char>(in)), {});
+                                Eigen::Matrix3d K;
+                                K << 50, 0, 32, 0, 50, 24, 0, 0, 1;
+                                const Camera cam("c", 64, 48, K, Eigen::Matrix3d::Identity(), Eigen::Vector3d(0, 0, 2));
+                                ClothObservations obs({cam, cam});
+                                obs.append(bytes);
+                                for (int f = 0; f < obs.numFrames(); ++f)
+                                  for (int v = 0; v < obs.numViews(); ++v) {
+                                    obs.boundaryDistance(f, v, Eigen::Vector2d(17.5, 9.25));
+                                    obs.correspondences(f, v).size();
+                                  }
+                              }}},
       // a --joint-map string against the CMU skeleton's joints and the Bandai-Namco clip's
       {"joint_map", {"map.txt", [](const std::string& p) {
                        std::ifstream in(p, std::ios::binary);
