@@ -18,33 +18,10 @@
 
 #include "cloth_mpi.h"
 #include "tbsp/core/error.h"
+#include "tbsp/core/error_kind.h"
 
 namespace tbsp::cli {
 namespace {
-
-int kind_of(const std::exception_ptr& e) {
-  try {
-    std::rethrow_exception(e);
-  } catch (const Cancelled&) {
-    return 4;
-  } catch (const InvalidInput&) {
-    return 2;
-  } catch (const NumericalFailure&) {
-    return 3;
-  } catch (...) {
-    return 1;
-  }
-}
-
-std::string message_of(const std::exception_ptr& e) {
-  try {
-    std::rethrow_exception(e);
-  } catch (const std::exception& x) {
-    return x.what();
-  } catch (...) {
-    return "unknown error";
-  }
-}
 
 void all_sum(std::vector<double>& v) {
   if (!v.empty()) MPI_Allreduce(MPI_IN_PLACE, v.data(), int(v.size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
@@ -85,7 +62,7 @@ ClothWorkShare ClothRanks::share() const {
 void ClothRanks::agree(const std::exception_ptr& local) const {
   // per rank: its error kind (0 = none)
   std::vector<double> kinds(std::size_t(size_), 0.0);
-  kinds[std::size_t(rank_)] = local ? kind_of(local) : 0;
+  kinds[std::size_t(rank_)] = error_kind(local);
   all_sum(kinds);
   int failed = -1;
   for (int r = 0; r < size_ && failed < 0; ++r)
@@ -95,7 +72,7 @@ void ClothRanks::agree(const std::exception_ptr& local) const {
   constexpr std::size_t kChars = 2048;
   std::vector<double> text(kChars, 0.0);
   if (failed == rank_) {
-    const std::string m = message_of(local);
+    const std::string m = error_message(local);
     for (std::size_t i = 0; i < m.size() && i + 1 < kChars; ++i) text[i] = double(static_cast<unsigned char>(m[i]));
   }
   all_sum(text);
@@ -105,12 +82,7 @@ void ClothRanks::agree(const std::exception_ptr& local) const {
     msg += char(static_cast<unsigned char>(c));
   }
   if (failed != 0) msg = "(rank " + std::to_string(failed) + " of " + std::to_string(size_) + ") " + msg;
-  switch (int(kinds[std::size_t(failed)])) {
-    case 4: throw Cancelled(msg);
-    case 2: throw InvalidInput(msg);
-    case 3: throw NumericalFailure(msg);
-    default: throw Error(msg);
-  }
+  std::rethrow_exception(error_of_kind(int(kinds[std::size_t(failed)]), msg));
 }
 
 std::vector<std::string> ClothRanks::allgather(const std::string& mine) const {

@@ -11,6 +11,7 @@
 #include "../multiview/capture_features.h"
 #include "tbsp/cloth/cloth_parameter_estimation.h"
 #include "tbsp/core/error.h"
+#include "tbsp/core/error_kind.h"
 #include "tbsp/multiview/rasterizer.h"
 
 namespace tbsp {
@@ -103,40 +104,6 @@ struct Partial {
   int frames = 0;
 };
 
-// Error kinds exchanged between the processes of a work share (0: none).
-int error_kind(const std::exception_ptr& e) {
-  try {
-    std::rethrow_exception(e);
-  } catch (const Cancelled&) {
-    return 4;
-  } catch (const InvalidInput&) {
-    return 2;
-  } catch (const NumericalFailure&) {
-    return 3;
-  } catch (...) {
-    return 1;
-  }
-}
-
-std::string error_message(const std::exception_ptr& e) {
-  try {
-    std::rethrow_exception(e);
-  } catch (const std::exception& x) {
-    return x.what();
-  } catch (...) {
-    return "unknown error";
-  }
-}
-
-std::exception_ptr error_of_kind(int kind, const std::string& msg) {
-  switch (kind) {
-    case 4: return std::make_exception_ptr(Cancelled(msg));
-    case 2: return std::make_exception_ptr(InvalidInput(msg));
-    case 3: return std::make_exception_ptr(NumericalFailure(msg));
-    default: return std::make_exception_ptr(Error(msg));
-  }
-}
-
 // A work share's exchange after each process ran its simulations: every process ends with every
 // simulation's terms (each computed by one process, 0 on the others: the sums are exact) and, if
 // any failed, with the lowest failed simulation's error — its type and its message (sent by the
@@ -149,7 +116,7 @@ void share_results(const ClothWorkShare& share, std::vector<Partial>& part, std:
     const Partial& p = part[k];
     double* x = &v[k * kValues];
     x[0] = p.sum, x[1] = p.sil, x[2] = p.sift, x[3] = double(p.rim_samples), x[4] = double(p.feature_samples), x[5] = p.frames;
-    x[6] = err[k] ? error_kind(err[k]) : 0;
+    x[6] = error_kind(err[k]);
   }
   share.sum(v);
   long failed = -1;
