@@ -24,6 +24,7 @@
 #include "studio_frames.h"
 #include "tbsp/cloth/cloth_parameter_estimation.h"
 #include "tbsp/core/error.h"
+#include "tbsp/core/error_kind.h"
 #include "tbsp/io/atomic_file.h"
 #include "tbsp/io/mesh_io.h"
 #include "tbsp/io/studio.h"
@@ -327,14 +328,8 @@ int cmd_estimate(const EstimateArgs& a) {
       // every rank has the same error (ClothRanks::agree and the work share): rank 0 prints it
       try {
         return run_estimate(a, &ranks);
-      } catch (const Cancelled&) {
-        return 130;
-      } catch (const InvalidInput&) {
-        return 2;
-      } catch (const NumericalFailure&) {
-        return 3;
-      } catch (const std::exception&) {
-        return 1;
+      } catch (...) {
+        return exit_code_of(std::current_exception());
       }
     }
   }

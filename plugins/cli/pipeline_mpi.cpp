@@ -21,6 +21,7 @@
 #include "pipeline_mpi.h"
 #include "progress_bar.h"
 #include "tbsp/core/error.h"
+#include "tbsp/core/error_kind.h"
 #include "tbsp/io/atomic_file.h"
 
 namespace fs = std::filesystem;
@@ -49,29 +50,6 @@ std::string read_file(const std::string& p) {
   std::ostringstream ss;
   ss << in.rdbuf();
   return ss.str();
-}
-
-int code_of(std::exception_ptr e) {
-  try {
-    std::rethrow_exception(e);
-  } catch (const Cancelled&) {
-    return 130;
-  } catch (const InvalidInput&) {
-    return 2;
-  } catch (const NumericalFailure&) {
-    return 3;
-  } catch (...) {
-    return 1;
-  }
-}
-std::string message_of(std::exception_ptr e) {
-  try {
-    std::rethrow_exception(e);
-  } catch (const std::exception& x) {
-    return x.what();
-  } catch (...) {
-    return "unknown error";
-  }
 }
 
 std::vector<pipeline::FrameReport> frames_from_json(const std::string& text) {
@@ -128,8 +106,8 @@ int run_distributed(const pipeline::Pipeline& p, const pipeline::Registry& reg, 
   try {
     rep = pipeline::run_pipeline(p, reg, o);
   } catch (...) {
-    code = stopped_by_peer ? 0 : code_of(std::current_exception());
-    msg = message_of(std::current_exception());
+    code = stopped_by_peer ? 0 : exit_code_of(std::current_exception());
+    msg = error_message(std::current_exception());
     if (stopped_by_peer) code = -1;  // not an error of its own
   }
   std::vector<MPI_Request> reqs;

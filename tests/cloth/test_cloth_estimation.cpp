@@ -7,6 +7,7 @@
 #include <condition_variable>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 #include <mutex>
 #include <random>
 #include <string>
@@ -192,6 +193,11 @@ const SmallGt* small_gt(const ClothMaterial& truth) {
   return cached.get();
 }
 
+// The generating body (rigid weights, true δ, limb tubes) with a wrong material to start from.
+AnimatableModel generating_model(const SmallGt& g) {
+  return synth::generating_model(g.gt.mannequin, g.gt.skeleton, ClothMaterial{}, g.gt.model.settings);
+}
+
 }  // namespace
 
 TEST(ClothParameterEstimation, BadInputsAreClearErrors) {
@@ -238,8 +244,7 @@ TEST(ClothParameterEstimation, TrueBendingStiffnessIsNotWorseThanSofterAndBetter
   TBSP_REQUIRE_FILE(std::string(TBSP_SHARED_DATA_DIR) + "/capture/dopomoc__BVH/02_05.bvh");
   const SmallGt* g = small_gt(truth);
   ASSERT_NE(g, nullptr);
-  // the generating body (rigid weights, true δ, limb tubes), a wrong material to start from
-  const AnimatableModel model = synth::generating_model(g->gt.mannequin, g->gt.skeleton, ClothMaterial{}, g->gt.model.settings);
+  const AnimatableModel model = generating_model(*g);
   ClothParameterEstimation est(model, g->gt.poses, *g->obs);
   est.setReferenceSequence(g->gt.frames);
   std::vector<ClothMaterial> rhos;
@@ -268,7 +273,7 @@ TEST(ClothParameterEstimation, RestartPhasesScoreEveryShiftedWindow) {
   const SmallGt* g = small_gt(truth);
   ASSERT_NE(g, nullptr);
   ASSERT_EQ(g->gt.frames.size(), 24u);
-  const AnimatableModel model = synth::generating_model(g->gt.mannequin, g->gt.skeleton, ClothMaterial{}, g->gt.model.settings);
+  const AnimatableModel model = generating_model(*g);
   ClothParameterEstimation est(model, g->gt.poses, *g->obs);
   est.setReferenceSequence(g->gt.frames);
   const ClothFitEnergy one = est.evaluate(0, truth);
@@ -342,7 +347,7 @@ TEST(ClothParameterEstimation, ProcessesSharingTheSimulationsGetTheSameBitsAndTh
   TBSP_REQUIRE_FILE(std::string(TBSP_SHARED_DATA_DIR) + "/capture/dopomoc__BVH/02_05.bvh");
   const SmallGt* g = small_gt(truth);
   ASSERT_NE(g, nullptr);
-  const AnimatableModel model = synth::generating_model(g->gt.mannequin, g->gt.skeleton, ClothMaterial{}, g->gt.model.settings);
+  const AnimatableModel model = generating_model(*g);
   ClothParameterEstimation one(model, g->gt.poses, *g->obs);
   one.setReferenceSequence(g->gt.frames);
   const std::vector<ClothMaterial> rhos{truth, {4.0, 30.0, 0.3}};
@@ -350,12 +355,14 @@ TEST(ClothParameterEstimation, ProcessesSharingTheSimulationsGetTheSameBitsAndTh
   constexpr int kProcesses = 4;                                     // more processes than a sample has windows
   ThreadAllreduce net(kProcesses);
   std::vector<std::vector<ClothFitEnergy>> got(kProcesses);
-  as_processes(kProcesses, net, [&](int r, const ClothWorkShare& share) {
-    ClothParameterEstimation est(model, g->gt.poses, *g->obs);
-    est.setReferenceSequence(g->gt.frames);
-    est.setWorkShare(share);
-    got[std::size_t(r)] = est.evaluate(0, rhos);
-  });
+  // one "process": its own estimation object on the shared observations
+  auto process = [&](const ClothWorkShare& share) {
+    auto est = std::make_unique<ClothParameterEstimation>(model, g->gt.poses, *g->obs);
+    est->setReferenceSequence(g->gt.frames);
+    est->setWorkShare(share);
+    return est;
+  };
+  as_processes(kProcesses, net, [&](int r, const ClothWorkShare& share) { got[std::size_t(r)] = process(share)->evaluate(0, rhos); });
   EXPECT_FALSE(net.mismatch());
   for (int r = 0; r < kProcesses; ++r) {
     ASSERT_EQ(got[std::size_t(r)].size(), want.size());
@@ -379,11 +386,8 @@ TEST(ClothParameterEstimation, ProcessesSharingTheSimulationsGetTheSameBitsAndTh
   ASSERT_FALSE(single.empty()) << "a negative drag must be refused";
   std::vector<std::string> messages(kProcesses);
   as_processes(kProcesses, net, [&](int r, const ClothWorkShare& share) {
-    ClothParameterEstimation est(model, g->gt.poses, *g->obs);
-    est.setReferenceSequence(g->gt.frames);
-    est.setWorkShare(share);
     try {
-      est.evaluate(0, bad);
+      process(share)->evaluate(0, bad);
       messages[std::size_t(r)] = "no error";
     } catch (const InvalidInput& e) {
       messages[std::size_t(r)] = e.what();
@@ -395,16 +399,14 @@ TEST(ClothParameterEstimation, ProcessesSharingTheSimulationsGetTheSameBitsAndTh
   // a cancel on process 1 only (after the first batch of the search): every process stops
   std::vector<int> cancelled(kProcesses, 0);
   as_processes(kProcesses, net, [&](int r, const ClothWorkShare& share) {
-    ClothParameterEstimation est(model, g->gt.poses, *g->obs);
-    est.setReferenceSequence(g->gt.frames);
+    const auto est = process(share);
     ClothEstimationOptions o;
     o.start_samples = 1;
     o.max_evaluations = 3;
-    est.setOptions(o);
-    est.setWorkShare(share);
-    est.setProgressCallback([r](double, const std::string&) { return r != 1; });
+    est->setOptions(o);
+    est->setProgressCallback([r](double, const std::string&) { return r != 1; });
     try {
-      est.estimate();
+      est->estimate();
     } catch (const Cancelled&) {
       cancelled[std::size_t(r)] = 1;
     }

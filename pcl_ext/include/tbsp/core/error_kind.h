@@ -29,6 +29,18 @@ inline int error_kind(const std::exception_ptr& e) {
   }
 }
 
+/// The exit code of the tbsp CLI for an exception (docs/errors.md): 2 invalid input, 3
+/// numerical failure, 130 cancelled, 1 anything else; 0 for none (null).
+inline int exit_code_of(const std::exception_ptr& e) {
+  switch (error_kind(e)) {
+    case 0: return 0;
+    case 2: return 2;
+    case 3: return 3;
+    case 4: return 130;
+    default: return 1;
+  }
+}
+
 /// The message of an exception (what(); "unknown error" for one not derived from std::exception).
 inline std::string error_message(const std::exception_ptr& e) {
   try {
