@@ -2,6 +2,7 @@
 // (thesis §10.7; ClothParameterEstimation), with the report, the estimated model and the energy
 // landscape (Fig. 10.5) as a PNG.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -216,6 +217,7 @@ int run_estimate(EstimateArgs a, const Ranks* ranks) {
   const bool lead = !ranks || ranks->rank == 0;
   ProgressBar bar(!a.quiet && lead);
   const auto cb = bar.callback();
+  const auto t_obs = std::chrono::steady_clock::now();
   EstimateInputs in;
   if (ranks) {  // every rank reads on its own: a rank that fails alone must stop the others too
     std::exception_ptr err;
@@ -238,6 +240,7 @@ int run_estimate(EstimateArgs a, const Ranks* ranks) {
   const ClothObservations& obs = *in.obs;
   const std::unique_ptr<ClothMaterial>& truth = in.truth;
   const int frames = in.frames;
+  const double obs_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_obs).count();
   ClothParameterEstimation est(model, poses, obs);
   if (!reference.empty()) est.setReferenceSequence(reference);
   est.setOptions(a.o);
@@ -283,6 +286,7 @@ int run_estimate(EstimateArgs a, const Ranks* ranks) {
   rep["window_phases"] = a.o.window_phases;
   rep["observations"] = {{"boundary_pixels", obs.numBoundaryPixels()}, {"correspondences", obs.numCorrespondences()}, {"megabytes", obs.memoryBytes() / 1e6}};
   rep["processes"] = ranks ? ranks->size : 1;
+  rep["observation_seconds"] = obs_seconds;  // reading the inputs and observing every frame (with ranks: their exchange too)
   rep["simulations"] = r.simulations;
   rep["seconds"] = r.seconds;
   nlohmann::json regions = nlohmann::json::array();
