@@ -65,6 +65,9 @@ void add_estimate(CLI::App& cloth, EstimateArgs& a, CLI::App*& sub) {
   sub->add_option("--start-samples", a.o.start_samples, "ours: start design size (default 8)")->check(CLI::Range(1, 1000));
   sub->add_option("--grid", a.o.grid_k, "thesis: K grid samples per axis (default 4)")->check(CLI::Range(1, 10));
   sub->add_option("--greedy", a.o.greedy_samples, "thesis: greedy samples (default 192)")->check(CLI::NonNegativeNumber);
+  sub->add_option("--greedy-batch", a.o.greedy_batch,
+                  "thesis: greedy samples per batch (default 2; the result depends on it, not on threads or ranks; 1 = strictly sequential)")
+      ->check(CLI::Range(1, 1000));
   sub->add_option("--window", a.o.window, "frames per simulation window restarted from --reference (default 10; 0 = whole sequence)")
       ->check(CLI::Range(0, 10000));
   sub->add_option("--window-phases", a.o.window_phases,

@@ -31,6 +31,7 @@ bool ClothEstimationOptions::isValid(std::string* why) const {
   if (!(upper.d_n >= lower.d_n && upper.d_t >= lower.d_t && upper.k_bend >= lower.k_bend)) return fail("the search box has upper < lower");
   if (grid_k < 1 || grid_k > 10) return fail("grid_k must be in 1..10");
   if (greedy_samples < 0) return fail("greedy_samples must be ≥ 0");
+  if (greedy_batch < 1 || greedy_batch > 1000) return fail("greedy_batch must be in 1..1000");
   if (start_samples < 1 || start_samples > 1000) return fail("start_samples must be in 1..1000");
   if (max_evaluations < start_samples) return fail("max_evaluations must be ≥ start_samples");
   if (!(tolerance > 0) || !std::isfinite(tolerance)) return fail("tolerance must be positive");

@@ -4,10 +4,6 @@
 #include <chrono>
 #include <cmath>
 
-#ifdef _OPENMP
-#include <omp.h>
-#endif
-
 #include "tbsp/cloth/cloth_parameter_estimation.h"
 #include "tbsp/core/error.h"
 #include "cloth_search.h"
@@ -17,14 +13,6 @@ namespace tbsp {
 namespace {
 
 using Unit = detail::UnitPoint;
-
-int batch_size() {
-#ifdef _OPENMP
-  return std::max(1, omp_get_max_threads());
-#else
-  return 1;
-#endif
-}
 
 ClothMaterial from_unit(const Unit& u, const ClothEstimationOptions& o) {
   ClothMaterial m;
@@ -68,15 +56,7 @@ ClothRegionEstimate ClothParameterEstimation::estimateRegion(int region, std::ve
   ClothRegionEstimate r;
   r.region = region;
   if (o.search == ClothSearch::Thesis) {
-    // the greedy samples are drawn in batches of the threads of all processes (every process
-    // must draw the same batches)
-    int batch = batch_size();
-    if (share_.size > 1) {
-      std::vector<double> v{double(batch)};
-      share_.sum(v);
-      batch = int(v[0]);
-    }
-    const Unit u = detail::thesis_search(energy, o.grid_k, o.greedy_samples, o.seed, batch);
+    const Unit u = detail::thesis_search(energy, o.grid_k, o.greedy_samples, o.seed, o.greedy_batch);
     r.rho = from_unit(u, o);
     r.energy = evaluate(region, r.rho);  // the mean particle was not simulated
     samples.push_back({region, r.rho, r.energy});

@@ -38,8 +38,9 @@ private:
 
 /// The thesis' search: a K³ grid at the cell centres, then `greedy_samples` samples from
 /// N(current, q(n)·σ₁) with q falling linearly from 1 to 0 and σ₁ = 1/K, clamped to the cube, each
-/// replacing the current particle when lower; drawn in batches of `batch` (the draws do not depend
-/// on it). Returns the mean of the last ten particles (not evaluated; the grid's best when
+/// replacing the current particle when lower; drawn in batches of `batch` around the particle as
+/// it was before the batch (so the result depends on `batch`; the random numbers do not).
+/// Returns the mean of the last ten particles (not evaluated; the grid's best when
 /// greedy_samples = 0).
 UnitPoint thesis_search(MemoEnergy& energy, int grid_k, int greedy_samples, std::uint64_t seed, int batch);
 

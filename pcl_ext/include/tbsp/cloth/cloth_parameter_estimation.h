@@ -76,6 +76,11 @@ struct ClothEstimationOptions {
   ClothSearch search = ClothSearch::Bobyqa;
   int grid_k = 4;                ///< Thesis: K, grid samples per axis, 1..10
   int greedy_samples = 192;      ///< Thesis: n_sam, ≥ 0
+  /// Thesis: greedy samples drawn — and simulated in parallel — per batch, 1..1000. A sample
+  /// competes with the current particle after its batch, so the result depends on this (and on
+  /// nothing else: not on the thread or process count). 1 = the thesis' strictly sequential
+  /// greedy search; 2 = the figures of docs/cloth.md. A batch's windows run in parallel anyway.
+  int greedy_batch = 2;
   int start_samples = 8;         ///< Bobyqa: start design size (a scrambled 3-D Halton set + the box centre), 1..1000
   int max_evaluations = 40;      ///< Bobyqa: simulations in all (start design included), ≥ start_samples
   double tolerance = 0.01;       ///< Bobyqa: a round stops when a step changes ρ by less than this share of the box (restarts: min(this, region/4)), > 0
