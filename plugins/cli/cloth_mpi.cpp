@@ -90,17 +90,19 @@ std::vector<std::string> ClothRanks::allgather(const std::string& mine) const {
   std::vector<double> sizes(std::size_t(size_), 0.0);
   sizes[std::size_t(rank_)] = double(mine.size());
   all_sum(sizes);
-  const std::size_t n = static_cast<std::size_t>(size_);
-  std::vector<int> counts(n), displs(n);
   double total = 0;
-  for (int r = 0; r < size_; ++r) {
-    displs[std::size_t(r)] = int(total);
-    counts[std::size_t(r)] = int(sizes[std::size_t(r)]);
-    total += sizes[std::size_t(r)];
-  }
-  if (total > double(INT_MAX))
+  for (double b : sizes) total += b;
+  if (total > double(INT_MAX))  // (the same sizes on every rank: every rank throws)
     throw InvalidInput("the observations of all ranks (" + std::to_string(total / 1e9) +
                        " GB) exceed one MPI message (2 GB): estimate from fewer frames or views per run");
+  const std::size_t n = static_cast<std::size_t>(size_);
+  std::vector<int> counts(n), displs(n);
+  int at = 0;
+  for (std::size_t r = 0; r < n; ++r) {
+    displs[r] = at;
+    counts[r] = int(sizes[r]);
+    at += counts[r];
+  }
   std::string all(std::size_t(total), '\0');
   MPI_Allgatherv(mine.data(), int(mine.size()), MPI_CHAR, all.data(), counts.data(), displs.data(), MPI_CHAR, MPI_COMM_WORLD);
   std::vector<std::string> out;
