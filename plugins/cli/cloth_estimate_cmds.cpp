@@ -208,8 +208,7 @@ void read_inputs(EstimateArgs& a, EstimateInputs& in, const ProgressCallback& cb
 // This process as one of several (mpirun): its rank, the work share and the agreement on errors
 // of the steps each rank runs alone (ClothRanks, cloth_mpi.h).
 struct Ranks {
-  int rank = 0, size = 1;
-  ClothWorkShare share;
+  ClothWorkShare share;  // its rank and size are this process's
   std::function<void(const std::exception_ptr&)> agree;
   std::function<std::vector<std::string>(const std::string&)> allgather;
 };
@@ -217,7 +216,7 @@ struct Ranks {
 // The estimation on one process (ranks: null) or as one rank of several (every rank computes its
 // share of the simulations; rank 0 shows the progress and writes the outputs).
 int run_estimate(EstimateArgs a, const Ranks* ranks) {
-  const bool lead = !ranks || ranks->rank == 0;
+  const bool lead = !ranks || ranks->share.rank == 0;
   ProgressBar bar(!a.quiet && lead);
   const auto cb = bar.callback();
   const auto t_obs = std::chrono::steady_clock::now();
@@ -225,7 +224,7 @@ int run_estimate(EstimateArgs a, const Ranks* ranks) {
   if (ranks) {  // every rank reads on its own: a rank that fails alone must stop the others too
     std::exception_ptr err;
     try {
-      read_inputs(a, in, cb, !a.quiet && lead, ranks->rank, ranks->size);
+      read_inputs(a, in, cb, !a.quiet && lead, ranks->share.rank, ranks->share.size);
     } catch (...) {
       err = std::current_exception();
     }
@@ -288,7 +287,7 @@ int run_estimate(EstimateArgs a, const Ranks* ranks) {
   rep["window"] = a.o.window;
   rep["window_phases"] = a.o.window_phases;
   rep["observations"] = {{"boundary_pixels", obs.numBoundaryPixels()}, {"correspondences", obs.numCorrespondences()}, {"megabytes", obs.memoryBytes() / 1e6}};
-  rep["processes"] = ranks ? ranks->size : 1;
+  rep["processes"] = ranks ? ranks->share.size : 1;
   rep["observation_seconds"] = obs_seconds;  // reading the inputs and observing every frame (with ranks: their exchange too)
   rep["simulations"] = r.simulations;
   rep["seconds"] = r.seconds;
@@ -326,12 +325,10 @@ int cmd_estimate(const EstimateArgs& a) {
     if (mpi.size() > 1) {
       mpi.shareCores();
       Ranks ranks;
-      ranks.rank = mpi.rank();
-      ranks.size = mpi.size();
       ranks.share = mpi.share();
       ranks.agree = [&mpi](const std::exception_ptr& e) { mpi.agree(e); };
       ranks.allgather = [&mpi](const std::string& mine) { return mpi.allgather(mine); };
-      if (ranks.rank == 0) return run_estimate(a, &ranks);  // its error is printed by main()
+      if (mpi.rank() == 0) return run_estimate(a, &ranks);  // its error is printed by main()
       // every rank has the same error (ClothRanks::agree and the work share): rank 0 prints it
       try {
         return run_estimate(a, &ranks);

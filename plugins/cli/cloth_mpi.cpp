@@ -40,12 +40,9 @@ ClothRanks::ClothRanks() {
   MPI_Comm_free(&node);
 }
 
-int ClothRanks::shareCores() const {
+void ClothRanks::shareCores() const {
 #ifdef _OPENMP
   if (!std::getenv("OMP_NUM_THREADS")) omp_set_num_threads(std::max(1, omp_get_num_procs() / std::max(1, local_size_)));
-  return omp_get_max_threads();
-#else
-  return 1;
 #endif
 }
 
@@ -68,21 +65,9 @@ void ClothRanks::agree(const std::exception_ptr& local) const {
   for (int r = 0; r < size_ && failed < 0; ++r)
     if (kinds[std::size_t(r)] != 0) failed = r;
   if (failed < 0) return;
-  // the failing rank's message, as character codes
-  constexpr std::size_t kChars = 2048;
-  std::vector<double> text(kChars, 0.0);
-  if (failed == rank_) {
-    const std::string m = error_message(local);
-    for (std::size_t i = 0; i < m.size() && i + 1 < kChars; ++i) text[i] = double(static_cast<unsigned char>(m[i]));
-  }
-  all_sum(text);
-  std::string msg;
-  for (double c : text) {
-    if (c == 0) break;
-    msg += char(static_cast<unsigned char>(c));
-  }
-  if (failed != 0) msg = "(rank " + std::to_string(failed) + " of " + std::to_string(size_) + ") " + msg;
-  std::rethrow_exception(error_of_kind(int(kinds[std::size_t(failed)]), msg));
+  // the failing rank's error and message, on every rank
+  const std::string where = failed != 0 ? "(rank " + std::to_string(failed) + " of " + std::to_string(size_) + ") " : "";
+  std::rethrow_exception(share_error(int(kinds[std::size_t(failed)]), failed == rank_, local, all_sum, where));
 }
 
 std::vector<std::string> ClothRanks::allgather(const std::string& mine) const {

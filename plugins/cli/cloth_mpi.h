@@ -23,8 +23,7 @@ public:
   int localSize() const { return local_size_; }
   /// Unless OMP_NUM_THREADS is set: this rank's OpenMP threads = the node's cores / its ranks
   /// (mpirun starts every rank with all cores; 2 ranks × 2 threads on 2 cores only contend).
-  /// Returns the threads this rank uses.
-  int shareCores() const;
+  void shareCores() const;
   /// The work share over the ranks: the sum is MPI_Allreduce(MPI_SUM) on MPI_COMM_WORLD.
   ClothWorkShare share() const;
   /// Collective: returns when no rank has an error; otherwise every rank throws the error of the

@@ -127,22 +127,11 @@ void share_results(const ClothWorkShare& share, std::vector<Partial>& part, std:
     if (failed < 0 && x[6] != 0) failed = long(k);
   }
   if (failed < 0) return;
-  // the failed simulation's message, from the process that ran it, as character codes
-  constexpr std::size_t kChars = 1024;
-  std::vector<double> text(kChars, 0.0);
-  if (failed % share.size == share.rank) {
-    const std::string m = error_message(err[std::size_t(failed)]);
-    for (std::size_t i = 0; i < m.size() && i + 1 < kChars; ++i) text[i] = double(static_cast<unsigned char>(m[i]));
-  }
-  share.sum(text);
-  std::string msg;
-  for (double c : text) {
-    if (c == 0) break;
-    msg += char(static_cast<unsigned char>(c));
-  }
-  const int kind = int(v[std::size_t(failed) * kValues + 6]);
-  for (auto& e : err) e = nullptr;
-  err[std::size_t(failed)] = error_of_kind(kind, msg);
+  // the failed simulation's error, with the message of the process that ran it
+  const std::exception_ptr e = share_error(int(v[std::size_t(failed) * kValues + 6]), failed % share.size == share.rank,
+                                           err[std::size_t(failed)], share.sum);
+  for (auto& x : err) x = nullptr;
+  err[std::size_t(failed)] = e;
 }
 
 struct FrameTerms {

@@ -4,8 +4,11 @@
 /// go over the wire, and the receiver throws the same type with the same message
 /// (ClothWorkShare, `tbsp cloth estimate` under mpirun).
 
+#include <cstddef>
 #include <exception>
+#include <functional>
 #include <string>
+#include <vector>
 
 #include "tbsp/core/error.h"
 
@@ -61,6 +64,28 @@ inline std::exception_ptr error_of_kind(int kind, const std::string& message) {
     case 3: return std::make_exception_ptr(NumericalFailure(message));
     default: return std::make_exception_ptr(Error(message));
   }
+}
+
+/// One process's error, thrown alike on every process. Collective: every process calls it at the
+/// same point with the same `kind` (error_kind of the error; already agreed, e.g. through `sum`);
+/// `mine` is the error on the process that had it (`owner`), ignored elsewhere. Its message
+/// travels through `sum` — an elementwise sum over the processes (MPI_Allreduce with MPI_SUM) —
+/// as character codes (at most `max_chars` − 1 of them). Returns the exception of `kind` with
+/// `prefix` + that message: the same on every process.
+inline std::exception_ptr share_error(int kind, bool owner, const std::exception_ptr& mine, const std::function<void(std::vector<double>&)>& sum,
+                                      const std::string& prefix = "", std::size_t max_chars = 2048) {
+  std::vector<double> text(max_chars, 0.0);
+  if (owner) {
+    const std::string m = error_message(mine);
+    for (std::size_t i = 0; i < m.size() && i + 1 < max_chars; ++i) text[i] = double(static_cast<unsigned char>(m[i]));
+  }
+  sum(text);
+  std::string msg = prefix;
+  for (double c : text) {
+    if (c == 0) break;
+    msg += char(static_cast<unsigned char>(c));
+  }
+  return error_of_kind(kind, msg);
 }
 
 }  // namespace tbsp
