@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # `tbsp cloth estimate` under mpirun -np 2 (ctest label mpi): the estimate, the report's samples
-# and energies and the landscape bit-identical to the one-process run; a bad input on every rank ->
-# one message from rank 0, exit 2, no hang, no output folder.
+# and energies and the landscape bit-identical to the one-process run; a bad input on every rank,
+# and a frame only rank 1 reads that cannot be decoded -> one message from rank 0 (naming rank 1
+# in the second case), exit 2, no hang, no output folder.
 #   check_cloth_mpi.sh TBSP MPIEXEC SHARED_DATA_DIR
 set -euo pipefail
 tbsp=$1; mpiexec=$2; shared=$3
@@ -43,3 +44,21 @@ cat err.txt
 [ "$(grep -c '1 meshes for the studio' err.txt)" -eq 1 ] || { echo "expected the message once"; exit 1; }
 [ ! -e bad ] || { echo "an output folder was written"; exit 1; }
 echo "a bad input under mpirun: exit $rc, one message, nothing written"
+
+# one rank fails alone: rank 1 observes frames 8-15, and one of its images cannot be decoded;
+# rank 0 read its own frames without fault, learns of the error at the ranks' agreement and
+# prints it once, naming rank 1; nothing is written
+cp -r seq/studio broken
+printf 'not a PNG' > broken/images/cam0/0015.png
+set +e
+timeout 120 "$mpiexec" -np 2 --oversubscribe "$tbsp" cloth estimate --model model.json --studio broken/studio.yaml --bvh "$clip" \
+  --reference seq --out bad1 -q 2> err1.txt
+rc=$?
+set -e
+cat err1.txt
+[ "$rc" -eq 2 ] || { echo "expected exit 2 from the undecodable frame, got $rc"; exit 1; }
+[ "$(grep -c 'cannot be decoded' err1.txt)" -eq 1 ] || { echo "expected the message once"; exit 1; }
+grep -q '(rank 1 of 2)' err1.txt || { echo "expected the message to name rank 1"; exit 1; }
+grep -q "0015.png" err1.txt || { echo "expected the message to name the file"; exit 1; }
+[ ! -e bad1 ] || { echo "an output folder was written"; exit 1; }
+echo "a frame only rank 1 reads is broken: exit $rc, one message naming rank 1 and the file, nothing written"
