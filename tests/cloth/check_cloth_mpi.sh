@@ -32,15 +32,21 @@ grep -q '"processes": 1' one/estimate_report.json
 grep -q '"processes": 2' two/estimate_report.json
 echo "mpirun -np 2: estimate, report and landscape bit-identical to the one-process run"
 
+# an estimate under mpirun -np 2 that must fail with exit 2 (no hang): $1 = its stderr file, then
+# the estimate's own arguments
+fails() {
+  local err=$1; shift
+  set +e
+  timeout 120 "$mpiexec" -np 2 --oversubscribe "$tbsp" cloth estimate --model model.json --bvh "$clip" -q "$@" 2> "$err"
+  rc=$?
+  set -e
+  cat "$err"
+  [ "$rc" -eq 2 ] || { echo "expected exit 2, got $rc"; exit 1; }
+}
+
 # a reference with fewer meshes than frames: the same error on both ranks, printed once
 mkdir short && cp seq/mesh_0000.ply short/
-set +e
-timeout 120 "$mpiexec" -np 2 --oversubscribe "$tbsp" cloth estimate --model model.json --studio seq/studio/studio.yaml --bvh "$clip" \
-  --reference short --out bad -q 2> err.txt
-rc=$?
-set -e
-cat err.txt
-[ "$rc" -eq 2 ] || { echo "expected exit 2 from the bad input, got $rc"; exit 1; }
+fails err.txt --studio seq/studio/studio.yaml --reference short --out bad
 [ "$(grep -c '1 meshes for the studio' err.txt)" -eq 1 ] || { echo "expected the message once"; exit 1; }
 [ ! -e bad ] || { echo "an output folder was written"; exit 1; }
 echo "a bad input under mpirun: exit $rc, one message, nothing written"
@@ -50,13 +56,7 @@ echo "a bad input under mpirun: exit $rc, one message, nothing written"
 # prints it once, naming rank 1; nothing is written
 cp -r seq/studio broken
 printf 'not a PNG' > broken/images/cam0/0015.png
-set +e
-timeout 120 "$mpiexec" -np 2 --oversubscribe "$tbsp" cloth estimate --model model.json --studio broken/studio.yaml --bvh "$clip" \
-  --reference seq --out bad1 -q 2> err1.txt
-rc=$?
-set -e
-cat err1.txt
-[ "$rc" -eq 2 ] || { echo "expected exit 2 from the undecodable frame, got $rc"; exit 1; }
+fails err1.txt --studio broken/studio.yaml --reference seq --out bad1
 [ "$(grep -c 'cannot be decoded' err1.txt)" -eq 1 ] || { echo "expected the message once"; exit 1; }
 grep -q '(rank 1 of 2)' err1.txt || { echo "expected the message to name rank 1"; exit 1; }
 grep -q "0015.png" err1.txt || { echo "expected the message to name the file"; exit 1; }
