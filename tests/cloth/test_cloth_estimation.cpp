@@ -365,16 +365,16 @@ TEST(ClothParameterEstimation, ThesisSearchGivesTheSameEstimateOnAnyThreadCount)
   };
   // batches of the thread count (the behaviour before greedy_batch) would draw the third sample
   // after that improvement on one thread and before it on three
-  const ClothEstimationResult one = run(1), two = run(3);
-  ASSERT_EQ(one.samples.size(), two.samples.size());
+  const ClothEstimationResult one = run(1), three = run(3);
+  ASSERT_EQ(one.samples.size(), three.samples.size());
   for (std::size_t i = 0; i < one.samples.size(); ++i) {
-    EXPECT_EQ(one.samples[i].rho.d_n, two.samples[i].rho.d_n) << "sample " << i;
-    EXPECT_EQ(one.samples[i].rho.k_bend, two.samples[i].rho.k_bend) << "sample " << i;
-    EXPECT_EQ(one.samples[i].energy.e_fit, two.samples[i].energy.e_fit) << "sample " << i;
+    EXPECT_EQ(one.samples[i].rho.d_n, three.samples[i].rho.d_n) << "sample " << i;
+    EXPECT_EQ(one.samples[i].rho.k_bend, three.samples[i].rho.k_bend) << "sample " << i;
+    EXPECT_EQ(one.samples[i].energy.e_fit, three.samples[i].energy.e_fit) << "sample " << i;
   }
-  EXPECT_EQ(one.regions[0].rho.d_n, two.regions[0].rho.d_n);
-  EXPECT_EQ(one.regions[0].rho.d_t, two.regions[0].rho.d_t);
-  EXPECT_EQ(one.regions[0].rho.k_bend, two.regions[0].rho.k_bend);
+  EXPECT_EQ(one.regions[0].rho.d_n, three.regions[0].rho.d_n);
+  EXPECT_EQ(one.regions[0].rho.d_t, three.regions[0].rho.d_t);
+  EXPECT_EQ(one.regions[0].rho.k_bend, three.regions[0].rho.k_bend);
   o.greedy_batch = 0;
   ClothParameterEstimation est(model, g->gt.poses, *g->obs);
   EXPECT_THROW(est.setOptions(o), InvalidInput);
